@@ -132,3 +132,94 @@ class FreeSpace:
                 value.flags.writeable = False
             self._cache[key] = value
         return self._cache[key]
+
+
+def _segment_points(a: np.ndarray, b: np.ndarray, spacing: float) -> np.ndarray:
+    """Points every ``spacing`` (or closer) along segments a -> b, both (N, 2); endpoints included."""
+    if len(a) == 0:
+        return np.zeros((0, 2))
+    n = np.maximum(np.ceil(np.linalg.norm(b - a, axis=1) / spacing).astype(np.int64), 1) + 1
+    seg = np.repeat(np.arange(len(a)), n)
+    start = np.repeat(np.cumsum(n) - n, n)
+    t = (np.arange(n.sum()) - start) / np.repeat(n - 1, n)
+    return a[seg] + t[:, None] * (b[seg] - a[seg])
+
+
+def _triangle_points(tri_xy: np.ndarray, spacing: float) -> np.ndarray:
+    """Points on a regular barycentric lattice of each triangle (T, 3, 2), at most ``spacing`` apart."""
+    if len(tri_xy) == 0:
+        return np.zeros((0, 2))
+    edges = np.linalg.norm(tri_xy[:, [1, 2, 0]] - tri_xy, axis=2).max(axis=1)
+    n = np.maximum(np.ceil(edges / spacing).astype(np.int64), 1)
+    out = []
+    for k in np.unique(n):
+        sel = tri_xy[n == k]
+        i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1), indexing="ij")
+        keep = (i + j) <= k
+        w1 = (i[keep] / k)[None, :, None]
+        w2 = (j[keep] / k)[None, :, None]
+        p0, p1, p2 = sel[:, None, 0], sel[:, None, 1], sel[:, None, 2]
+        out.append((p0 + w1 * (p1 - p0) + w2 * (p2 - p0)).reshape(-1, 2))
+    return np.concatenate(out)
+
+
+def freespace_from_mesh(triangles_m: np.ndarray, cast_down, *, res_m: float = 0.05, band_lo_m: float = 0.1,
+                        band_hi_m: float = 1.5, slice_step_m: float = 0.05) -> FreeSpace:
+    """Free space of a static mesh at robot height.
+
+    - ``floor``: a downward ray from ``band_lo_m`` above the cell centre finds a surface within
+      0.25 m (so cells outside the building, with nothing underneath, are not floor).
+    - ``occupied``: some surface lies between ``band_lo_m`` and ``band_hi_m`` above the floor.
+      Non-horizontal surfaces are found by slicing the mesh with horizontal planes every
+      ``slice_step_m``; surfaces thinner than the slice step inside the band (table tops, seats)
+      are rasterized from their xy projection.
+
+    ``triangles_m``: float64 (F, 3, 3), world frame, floor at z = 0. ``cast_down(origins (N, 3))``
+    returns the hit distance of rays cast straight down (inf on miss).
+    """
+    assert triangles_m.ndim == 3 and triangles_m.shape[1:] == (3, 3)
+    lo = triangles_m.reshape(-1, 3)[:, :2].min(axis=0) - 2 * res_m
+    hi = triangles_m.reshape(-1, 3)[:, :2].max(axis=0) + 2 * res_m
+    w, h = np.ceil((hi - lo) / res_m).astype(int)
+    origin = np.floor(lo / res_m) * res_m
+    fs_empty = FreeSpace(origin, res_m, np.zeros((h, w), bool), np.zeros((h, w), bool))
+
+    # Floor: downward rays from the band's lower edge.
+    centres = fs_empty.cell_to_world(np.argwhere(np.ones((h, w), bool)))
+    t = cast_down(np.c_[centres, np.full(len(centres), band_lo_m)])
+    floor = (t <= band_lo_m + 0.15).reshape(h, w)
+
+    # Occupancy: slices through the band, plus thin surfaces inside it.
+    z = triangles_m[:, :, 2]
+    zmin, zmax = z.min(axis=1), z.max(axis=1)
+    in_band = (zmax >= band_lo_m) & (zmin <= band_hi_m)
+    tri = triangles_m[in_band]
+    z, zmin, zmax = z[in_band], zmin[in_band], zmax[in_band]
+    pts = []
+    heights = np.arange(band_lo_m, band_hi_m + 1e-9, slice_step_m)
+    for hz in heights:
+        cross = (zmin < hz) & (zmax > hz)
+        if not cross.any():
+            continue
+        tc, zc = tri[cross], z[cross]
+        above = zc > hz
+        # each crossing triangle has exactly two edges with a sign change
+        ends = []
+        for e0, e1 in ((0, 1), (1, 2), (2, 0)):
+            ch = above[:, e0] != above[:, e1]
+            s = (hz - zc[:, e0]) / np.where(ch, zc[:, e1] - zc[:, e0], 1.0)
+            ends.append((ch, tc[:, e0, :2] + s[:, None] * (tc[:, e1, :2] - tc[:, e0, :2])))
+        ch = np.stack([e[0] for e in ends], axis=1)
+        p = np.stack([e[1] for e in ends], axis=1)
+        first = np.argmax(ch, axis=1)
+        second = 2 - np.argmax(ch[:, ::-1], axis=1)
+        rows = np.arange(len(tc))
+        pts.append(_segment_points(p[rows, first], p[rows, second], 0.5 * res_m))
+    thin = (np.minimum(zmax, band_hi_m) - np.maximum(zmin, band_lo_m)) < slice_step_m
+    pts.append(_triangle_points(tri[thin][:, :, :2], 0.5 * res_m))
+    pts_all = np.concatenate(pts) if pts else np.zeros((0, 2))
+    occupied = np.zeros((h, w), bool)
+    ij = fs_empty.world_to_cell(pts_all)
+    ok = fs_empty.in_bounds(ij)
+    occupied[ij[ok, 0], ij[ok, 1]] = True
+    return FreeSpace(origin, res_m, floor, occupied)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 
@@ -40,20 +41,30 @@ class TriplanarMaterials:
 
     def albedo(self, scene: "Scene", local_face: np.ndarray, global_face: np.ndarray,
                bary_uv: np.ndarray, points_m: np.ndarray) -> np.ndarray:
-        mat = self.face_material[local_face]
-        n = np.abs(scene.face_normals[global_face])
-        axis = np.argmax(n, axis=1)
-        # The two coordinates orthogonal to the dominant normal axis: x->(y,z), y->(x,z), z->(x,y).
-        a_idx = np.where(axis == 0, 1, 0)
-        b_idx = np.where(axis == 2, 1, 2)
-        rows = np.arange(len(points_m))
-        a = points_m[rows, a_idx]
-        b = points_m[rows, b_idx]
-        t = self.textures.shape[1]
-        scale = t / self.tile_m[mat]
-        ti = np.floor(b * scale).astype(np.int64) % t
-        tj = np.floor(a * scale).astype(np.int64) % t
-        return self.textures[mat, ti, tj].astype(np.float32) / 255.0
+        mat = self.face_material[local_face].astype(np.int64)
+        axis = scene.face_dominant_axis[global_face]
+        return _triplanar_lookup(np.ascontiguousarray(points_m, dtype=np.float64), axis, mat, self.textures,
+                                 self.tile_m.astype(np.float64))
+
+
+@numba.njit(cache=True, nogil=True)
+def _triplanar_lookup(points_m, axis, mat, textures, tile_m):  # pragma: no cover - compiled
+    """Texel of each hit: the tile coordinates are the two world coordinates orthogonal to the
+    face normal's dominant axis (x -> (y, z), y -> (x, z), z -> (x, y)), nearest texel, wrapping."""
+    n = points_m.shape[0]
+    t = textures.shape[1]
+    out = np.empty((n, 3), dtype=np.float32)
+    for k in range(n):
+        ax = axis[k]
+        a = points_m[k, 1] if ax == 0 else points_m[k, 0]
+        b = points_m[k, 1] if ax == 2 else points_m[k, 2]
+        m = mat[k]
+        scale = t / tile_m[m]
+        ti = int(np.floor(b * scale)) % t
+        tj = int(np.floor(a * scale)) % t
+        for c in range(3):
+            out[k, c] = textures[m, ti, tj, c] / np.float32(255.0)
+    return out
 
 
 @dataclass(frozen=True)
@@ -114,7 +125,11 @@ class Scene:
     lit: bool = True
     """Apply the fixed world light (procedural scenes) or show captured colours as they are."""
     rooms: tuple = ()
-    """Procedural scenes: the room rectangles (for plots and per-room statistics)."""
+    """Procedural scenes: the rooms (``procedural.Room``), for plots and per-room statistics."""
+    doors: tuple = ()
+    """Procedural scenes: the doors (``procedural.Door``)."""
+    wall_height_m: float = float("nan")
+    """Procedural scenes: height of walls and ceiling."""
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -154,6 +169,13 @@ class Scene:
         return self._cache["normals"]
 
     @property
+    def face_dominant_axis(self) -> np.ndarray:
+        """int8 (F,): index (0, 1, 2) of the largest absolute component of each face normal."""
+        if "axis" not in self._cache:
+            self._cache["axis"] = np.argmax(np.abs(self.face_normals), axis=1).astype(np.int8)
+        return self._cache["axis"]
+
+    @property
     def face_areas_m2(self) -> np.ndarray:
         if "areas" not in self._cache:
             tri = self.triangles_m
@@ -162,6 +184,8 @@ class Scene:
 
     def albedo(self, face_idx: np.ndarray, bary_uv: np.ndarray, points_m: np.ndarray) -> np.ndarray:
         """float32 (N, 3) albedo in [0, 1] at hits on faces ``(N,)`` with Embree barycentrics ``(N, 2)``."""
+        if len(self.parts) == 1:
+            return self.parts[0].appearance.albedo(self, face_idx, face_idx, bary_uv, points_m).astype(np.float32)
         out = np.empty((len(face_idx), 3), dtype=np.float32)
         if len(face_idx) == 0:
             return out
