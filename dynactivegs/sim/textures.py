@@ -140,10 +140,10 @@ def make_material(category: str, rng: np.random.Generator, t: int = TEXTURE_PX) 
     base = np.array(fam[int(rng.integers(len(fam)))]) * rng.uniform(0.85, 1.1, size=3)
     kind = str(rng.choice(CATEGORY_PATTERNS[category]))
     contrast = rng.uniform(0.25, 0.55)
-    if rng.random() < 0.35:  # a second hue from the same family
-        other = np.array(fam[int(rng.integers(len(fam)))])
-    else:
-        other = base * (1.0 - contrast) if base.mean() > 0.5 else np.clip(base + contrast, 0, 1)
+    darker_or_lighter = base * (1.0 - contrast) if base.mean() > 0.5 else np.clip(base + contrast, 0, 1)
+    other = np.array(fam[int(rng.integers(len(fam)))]) if rng.random() < 0.35 else darker_or_lighter
+    if np.abs(other - base).mean() < 0.12:  # too close to read as a pattern
+        other = darker_or_lighter
     p = _pattern(kind, rng, t)[..., None]
     img = (1.0 - p) * other + p * base
     img = np.clip(img, 0.0, 1.0)
