@@ -31,10 +31,39 @@ class PeopleMesh:
     vertices_m: np.ndarray        # float32 (V, 3)
     faces: np.ndarray             # int32 (F, 3)
     face_colors: np.ndarray       # uint8 (F, 3)
+    vertex_offsets: np.ndarray | None = None
+    """int64 (P + 1,): person p owns vertices [offsets[p], offsets[p+1]); None: one group."""
 
     @staticmethod
     def empty() -> "PeopleMesh":
         return PeopleMesh(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32), np.zeros((0, 3), np.uint8))
+
+    def pixel_boxes(self, T_world_cam: np.ndarray, K: np.ndarray, width: int, height: int,
+                    near_m: float = 0.05) -> list[tuple[int, int, int, int]]:
+        """Image-space boxes (u0, v0, u1, v1), end-exclusive, that contain each person's projection.
+
+        A person with a vertex closer than ``near_m`` in front of (or behind) the camera gets the
+        whole image, since its projection is unbounded.
+        """
+        offsets = np.array([0, len(self.vertices_m)]) if self.vertex_offsets is None else self.vertex_offsets
+        T_cam_world = np.linalg.inv(T_world_cam)
+        pc = self.vertices_m.astype(np.float64) @ T_cam_world[:3, :3].T + T_cam_world[:3, 3]
+        boxes = []
+        for a, b in zip(offsets[:-1], offsets[1:]):
+            q = pc[a:b]
+            if len(q) == 0 or q[:, 2].max() < near_m:
+                continue
+            if q[:, 2].min() < near_m:
+                boxes.append((0, 0, width, height))
+                continue
+            u = K[0, 0] * q[:, 0] / q[:, 2] + K[0, 2]
+            v = K[1, 1] * q[:, 1] / q[:, 2] + K[1, 2]
+            u0, u1 = int(np.floor(u.min())), int(np.ceil(u.max())) + 1
+            v0, v1 = int(np.floor(v.min())), int(np.ceil(v.max())) + 1
+            u0, v0, u1, v1 = max(u0, 0), max(v0, 0), min(u1, width), min(v1, height)
+            if u0 < u1 and v0 < v1:
+                boxes.append((u0, v0, u1, v1))
+        return boxes
 
 
 @dataclass(frozen=True)
@@ -113,11 +142,20 @@ class Renderer:
         dirs = rays_cam @ R.T
         t, face, bary = _cast(self._bvh, origin, dirs)
         person = np.zeros(len(t), dtype=bool)
+        fp = np.full(len(t), -1, dtype=np.int64)
         if people is not None and len(people.faces):
-            p_tri = people.vertices_m[people.faces]
-            tp, fp, _ = _cast(_embree_scene(p_tri), origin, dirs)
-            person = tp < t
-            t = np.where(person, tp, t)
+            # Only rays inside the people's projected boxes can hit them.
+            near = np.zeros((height, width), dtype=bool)
+            for u0, v0, u1, v1 in people.pixel_boxes(T_world_cam, K, width, height):
+                near[v0:v1, u0:u1] = True
+            cand = np.flatnonzero(near)
+            if len(cand):
+                tp, fpc, _ = _cast(_embree_scene(people.vertices_m[people.faces]), origin, dirs[cand])
+                closer = tp < t[cand]
+                hit_idx = cand[closer]
+                person[hit_idx] = True
+                t[hit_idx] = tp[closer]
+                fp[hit_idx] = fpc[closer]
         hit = np.isfinite(t)
         rgb = np.zeros((len(t), 3), dtype=np.float32)
         static_hit = hit & ~person

@@ -88,3 +88,40 @@ def test_camera_pose_is_level_and_faces_yaw():
     T = camera_pose(1.0, 2.0, math.pi / 2, 1.25)
     assert np.allclose(T[:3, 2], [0, 1, 0]) and np.allclose(T[:3, 1], [0, 0, -1])
     assert np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3)) and np.isclose(np.linalg.det(T[:3, :3]), 1.0)
+
+
+def _people_boxes(centres: list[tuple[float, float]]):
+    from dynactivegs.sim.render import PeopleMesh
+
+    vs, fs, offs = [], [], [0]
+    for cx, cy in centres:
+        b = trimesh.creation.box(extents=(0.4, 0.3, 1.7))
+        b.apply_translation((cx, cy, 0.85))
+        fs.append(b.faces + sum(len(v) for v in vs))
+        vs.append(b.vertices)
+        offs.append(offs[-1] + len(b.vertices))
+    f = np.concatenate(fs).astype(np.int32)
+    return PeopleMesh(np.concatenate(vs).astype(np.float32), f, np.full((len(f), 3), 200, np.uint8),
+                      np.array(offs))
+
+
+def test_people_render_matches_brute_force_merge_and_mask():
+    """People are cast only inside their projected boxes; the result must equal casting every ray
+    against the people and merging by depth (including a person right next to the camera)."""
+    from dynactivegs.sim.render import _cast, _embree_scene
+
+    r = Renderer(box_room())
+    w, h = 80, 46
+    K = intrinsics(w, h, 40.0, 40.0)
+    T = camera_pose(-2.0, 0.0, 0.0, 1.25)
+    people = _people_boxes([(0.5, 0.3), (1.5, -1.0), (-1.8, 0.05), (-2.5, 1.0)])  # last: behind the camera
+    out = r.render(T, K, w, h, people=people, min_depth_m=0.01, max_depth_m=100.0)
+    dirs = camera_rays(K, w, h) @ T[:3, :3].T
+    ts, _, _ = _cast(r._bvh, T[:3, 3], dirs)
+    tp, _, _ = _cast(_embree_scene(people.vertices_m[people.faces]), T[:3, 3], dirs)
+    expected_mask = (tp < ts).reshape(h, w)
+    expected_depth = np.minimum(ts, tp).reshape(h, w)
+    assert expected_mask.sum() > 50
+    assert np.array_equal(out.people_mask, expected_mask)
+    assert np.allclose(out.depth_m, expected_depth, atol=1e-5)
+    assert np.all(out.face_idx[out.people_mask] == -1)

@@ -1,0 +1,90 @@
+"""A scripted driver that tours the scene using the simulator's ground-truth free space.
+
+For demos, tests and benchmarks that need a robot path without the planner (for example a
+fixed path through an apartment with people walking through the view). The pipeline's own
+planner never uses ground-truth free space; this driver is not part of the method.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from dynactivegs.sim.freespace import FreeSpace
+from dynactivegs.sim.robot import Action, wrap_angle
+
+
+def grid_graph(mask: np.ndarray, res_m: float) -> csr_matrix:
+    """8-connected graph over the True cells of ``mask`` (H, W); node id = row * W + col, weights in metres."""
+    h, w = mask.shape
+    rows, cols, wts = [], [], []
+    ids = np.arange(h * w).reshape(h, w)
+    for di, dj in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        j0, j1 = max(0, -dj), w - max(0, dj)          # columns of the first cell of each pair
+        both = mask[:h - di, j0:j1] & mask[di:, j0 + dj:j1 + dj]
+        ia = ids[:h - di, j0:j1][both]
+        ib = ia + di * w + dj
+        rows += [ia, ib]
+        cols += [ib, ia]
+        wts += [np.full(2 * len(ia), res_m * math.hypot(di, dj))]
+    r = np.concatenate(rows)
+    return csr_matrix((np.concatenate(wts), (r, np.concatenate(cols))), shape=(h * w, h * w))
+
+
+class ScriptedDriver:
+    """Visits random far-apart goals in the free space, turning toward each waypoint and
+    driving forward when aligned. Deterministic given ``rng``."""
+
+    def __init__(self, freespace: FreeSpace, radius_m: float, rng: np.random.Generator,
+                 turn_step_rad: float = math.radians(10.0), min_goal_dist_m: float = 3.0) -> None:
+        self.fs = freespace
+        self.rng = rng
+        self.turn = turn_step_rad
+        self.min_goal = min_goal_dist_m
+        # keep a margin so that the robot does not graze walls on diagonal moves
+        self.mask = freespace.navigable(radius_m + freespace.res_m)
+        if not self.mask.any():
+            self.mask = freespace.navigable(radius_m)
+        self.graph = grid_graph(self.mask, freespace.res_m)
+        self.path: list[np.ndarray] = []
+
+    def _plan(self, xy: np.ndarray) -> None:
+        h, w = self.mask.shape
+        cells = np.argwhere(self.mask)
+        start = self.fs.world_to_cell(xy)
+        if not self.mask[start[0], start[1]]:
+            d2 = ((cells - start) ** 2).sum(axis=1)
+            start = cells[np.argmin(d2)]
+        dist, pred = dijkstra(self.graph, indices=int(start[0] * w + start[1]), return_predecessors=True)
+        reach = cells[np.isfinite(dist[cells[:, 0] * w + cells[:, 1]])]
+        far = reach[np.linalg.norm(self.fs.cell_to_world(reach) - xy, axis=1) >= self.min_goal]
+        pool = far if len(far) else reach
+        goal = pool[self.rng.integers(len(pool))]
+        node = int(goal[0] * w + goal[1])
+        chain = []
+        while node >= 0 and node != start[0] * w + start[1]:
+            chain.append(node)
+            node = int(pred[node])
+        chain = chain[::-1]
+        pts = self.fs.cell_to_world(np.stack([np.array(chain) // w, np.array(chain) % w], axis=1)) if chain else []
+        self.path = list(pts[::5]) + ([pts[-1]] if len(pts) else [])
+
+    def act(self, x_m: float, y_m: float, yaw_rad: float, blocked: bool = False) -> Action:
+        """The next action from the robot's pose; ``blocked`` says the last forward move failed."""
+        xy = np.array([x_m, y_m])
+        while self.path and np.linalg.norm(self.path[0] - xy) < 0.2:
+            self.path.pop(0)
+        if blocked and self.rng.random() < 0.3:
+            self.path = []
+        if not self.path:
+            self._plan(xy)
+            if not self.path:
+                return Action.TURN_LEFT
+        d = self.path[0] - xy
+        err = wrap_angle(math.atan2(d[1], d[0]) - yaw_rad)
+        if abs(err) > self.turn / 2 + 1e-9:
+            return Action.TURN_LEFT if err > 0 else Action.TURN_RIGHT
+        return Action.FORWARD
