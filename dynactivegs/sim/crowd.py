@@ -276,7 +276,7 @@ class Crowd:
         for i in range(p):
             self._new_goal(i)
         self._pack_paths()
-        first = np.array([path[min(1, len(path) - 1)] for path in self._paths]) - self._pos
+        first = np.array([path[0] for path in self._paths]).reshape(-1, 2) - self._pos
         self._heading = np.where(np.hypot(first[:, 0], first[:, 1]) > 1e-9, np.arctan2(first[:, 1], first[:, 0]),
                                  rng.uniform(-np.pi, np.pi, size=p))
 
