@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import ndimage
+from scipy.spatial import cKDTree
 
 
 @dataclass(frozen=True)
@@ -24,6 +25,10 @@ class FreeSpace:
     res_m: float                  # cell size
     floor: np.ndarray             # bool (H, W), a walkable floor surface exists under the cell
     occupied: np.ndarray          # bool (H, W), some static surface lies in the body's height band
+    obstacle_xy_m: np.ndarray | None = None
+    """float32 (N, 2) points on obstacle surfaces (from a mesh); when given, clearance to obstacles is
+    measured to these points instead of to the occupied cells' boundaries (which is conservative by up
+    to one cell)."""
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
@@ -70,9 +75,14 @@ class FreeSpace:
     def clearance_m(self) -> np.ndarray:
         """float64 (H, W): distance from each cell centre to the nearest blocked cell's boundary (0 inside)."""
         def compute() -> np.ndarray:
-            padded = np.pad(~self.blocked, 1, constant_values=False)  # outside the grid is blocked
-            d = ndimage.distance_transform_edt(padded)[1:-1, 1:-1] * self.res_m
-            return np.where(self.blocked, 0.0, np.maximum(d - 0.5 * self.res_m, 0.0))
+            walls = self.blocked if self.obstacle_xy_m is None else ~self.floor
+            padded = np.pad(~walls, 1, constant_values=False)  # outside the grid is blocked
+            d = np.maximum(ndimage.distance_transform_edt(padded)[1:-1, 1:-1] * self.res_m - 0.5 * self.res_m, 0.0)
+            if self.obstacle_xy_m is not None and len(self.obstacle_xy_m):
+                free = np.argwhere(~self.blocked)
+                dist, _ = cKDTree(self.obstacle_xy_m).query(self.cell_to_world(free), workers=-1)
+                d[free[:, 0], free[:, 1]] = np.minimum(d[free[:, 0], free[:, 1]], dist)
+            return np.where(self.blocked, 0.0, d)
         return self._cached("clearance", compute)
 
     def navigable(self, radius_m: float) -> np.ndarray:
@@ -222,4 +232,7 @@ def freespace_from_mesh(triangles_m: np.ndarray, cast_down, *, res_m: float = 0.
     ij = fs_empty.world_to_cell(pts_all)
     ok = fs_empty.in_bounds(ij)
     occupied[ij[ok, 0], ij[ok, 1]] = True
-    return FreeSpace(origin, res_m, floor, occupied)
+    q = np.round((pts_all - origin) / 0.01).astype(np.int64)   # deduplicate on a 1 cm lattice
+    key = np.unique(q[:, 0] * (1 << 31) + q[:, 1])
+    obstacle_xy = (np.stack([key >> 31, key & ((1 << 31) - 1)], axis=1) * 0.01 + origin).astype(np.float32)
+    return FreeSpace(origin, res_m, floor, occupied, obstacle_xy)

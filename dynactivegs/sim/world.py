@@ -99,7 +99,10 @@ class Simulator:
 
     def people_mesh(self) -> PeopleMesh:
         v, f, c = self.crowd.mesh()
-        return PeopleMesh(v, f, c)
+        n = len(self.crowd)
+        per_person = len(v) // max(n, 1)
+        assert per_person * n == len(v), "every person has the same template vertex count"
+        return PeopleMesh(v, f, c, np.arange(n + 1, dtype=np.int64) * per_person)
 
     # ------------------------------------------------------------------ internals
     def _spawn_robot(self, rng: np.random.Generator) -> RobotPose2D:

@@ -1,0 +1,152 @@
+"""The simulator as a whole: determinism, collisions, people vs. ground truth, free space."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+import trimesh
+
+from dynactivegs.config import CameraConfig, CrowdConfig, SimConfig
+from dynactivegs.records import RobotPose2D
+from dynactivegs.rng import derive_rng
+from dynactivegs.sim.freespace import freespace_from_mesh
+from dynactivegs.sim.render import Renderer
+from dynactivegs.sim.robot import Action
+from dynactivegs.sim.scripted import ScriptedDriver
+from dynactivegs.sim.world import Simulator
+
+SMALL_CAM = CameraConfig(width_px=64, height_px=37)
+
+
+def run(cfg: SimConfig, seed: int, steps: int):
+    sim = Simulator(cfg, seed)
+    driver = ScriptedDriver(sim.freespace, cfg.robot.radius_m, derive_rng(seed, "test-driver"))
+    frames, truths = [sim.observation()[0]], [sim.observation()[1]]
+    for _ in range(steps):
+        t = truths[-1]
+        f, t = sim.step(driver.act(t.robot.x_m, t.robot.y_m, t.robot.yaw_rad, t.collided))
+        frames.append(f)
+        truths.append(t)
+    return sim, frames, truths
+
+
+def test_same_seed_bit_identical_frames_and_tracks_different_seed_differs():
+    cfg = SimConfig(scene="apartment-00", camera=dataclasses.replace(SMALL_CAM, depth_noise_std_m=0.01))
+    _, fa, ta = run(cfg, 5, 40)
+    _, fb, tb = run(cfg, 5, 40)
+    _, fc, tc = run(cfg, 6, 40)
+    for a, b in zip(fa, fb):
+        assert a.rgb.tobytes() == b.rgb.tobytes() and a.depth_m.tobytes() == b.depth_m.tobytes()
+        assert a.T_world_cam.tobytes() == b.T_world_cam.tobytes() and a.stamp_ns == b.stamp_ns
+    for a, b in zip(ta, tb):
+        assert a.people_xy_m.tobytes() == b.people_xy_m.tobytes() and a.robot == b.robot
+    assert any(a.people_xy_m.shape != c.people_xy_m.shape or not np.array_equal(a.people_xy_m, c.people_xy_m)
+               for a, c in zip(ta, tc))
+    assert any(a.rgb.tobytes() != c.rgb.tobytes() for a, c in zip(fa, fc))
+
+
+def test_robot_cannot_pass_through_a_wall():
+    cfg = SimConfig(scene="tiny-00", camera=SMALL_CAM, crowd=CrowdConfig(count=0))
+    sim = Simulator(cfg, 0)
+    room = sim.scene.rooms[0]
+    for yaw in (0.0, math.pi / 2, math.pi, -math.pi / 2):
+        sim.robot = RobotPose2D((room.x0 + room.x1) / 2, (room.y0 + room.y1) / 2, yaw)
+        blocked = 0
+        for _ in range(60):
+            _, truth = sim.step(Action.FORWARD)
+            blocked += truth.collided
+            xy = np.array([truth.robot.x_m, truth.robot.y_m])
+            assert sim.freespace.is_navigable(xy, cfg.robot.radius_m), f"robot in an obstacle at {xy}"
+            inner = room.inner()
+            r = cfg.robot.radius_m
+            assert inner[0] + r - 1e-6 <= xy[0] <= inner[2] - r + 1e-6 and inner[1] + r - 1e-6 <= xy[1] <= inner[3] - r + 1e-6
+        assert blocked > 30, f"heading {yaw:.2f}: only {blocked} of 60 forward moves blocked"
+
+
+def test_robot_cannot_pass_through_a_person():
+    cfg = SimConfig(scene="tiny-00", camera=SMALL_CAM, crowd=CrowdConfig(count=1, speed_mps=0.01))
+    sim = Simulator(cfg, 0)
+    person = sim.crowd.positions_xy_m[0]
+    # stand 0.9 m from the person, facing them, with free space in between
+    for ang in np.linspace(0, 2 * np.pi, 24, endpoint=False):
+        start = person - 0.9 * np.array([math.cos(ang), math.sin(ang)])
+        if sim.freespace.segment_navigable(start, person, cfg.robot.radius_m):
+            break
+    else:
+        pytest.skip("no free approach in this layout")  # pragma: no cover - the layout is fixed
+    sim.robot = RobotPose2D(float(start[0]), float(start[1]), float(ang))
+    gaps = []
+    for _ in range(8):
+        _, truth = sim.step(Action.FORWARD)
+        p = truth.people_xy_m[0]
+        gaps.append(np.hypot(truth.robot.x_m - p[0], truth.robot.y_m - p[1]) - cfg.robot.radius_m - cfg.crowd.radius_m)
+    assert min(gaps) > -0.02, f"robot overlapped the person by {-min(gaps):.3f} m"
+    assert sum(1 for _ in gaps) and truth.collided, "the robot should end up blocked by the person"
+
+
+def test_robot_and_people_never_overlap_on_a_tour():
+    cfg = SimConfig(scene="apartment-01", camera=SMALL_CAM)
+    sim, _, truths = run(cfg, 3, 150)
+    worst = 0.0
+    for t in truths:
+        d = np.hypot(t.people_xy_m[:, 0] - t.robot.x_m, t.people_xy_m[:, 1] - t.robot.y_m)
+        worst = max(worst, float((cfg.robot.radius_m + cfg.crowd.radius_m - d).max()))
+    assert worst < 0.02, f"robot and a person overlapped by {worst:.3f} m"
+
+
+def test_people_are_in_frames_but_never_in_static_renders():
+    cfg = SimConfig(scene="apartment-00", camera=SMALL_CAM)
+    sim, frames, truths = run(cfg, 0, 60)
+    seen = 0
+    for f, t in zip(frames, truths):
+        static = sim.render_static(f.T_world_cam)
+        m = t.people_mask
+        # outside the people mask the frame is exactly the static render
+        assert np.array_equal(f.rgb[~m], static.rgb[~m]) and np.array_equal(f.depth_m[~m], static.depth_m[~m])
+        if m.any():
+            seen += 1
+            valid = (static.depth_m[m] > 0) & (f.depth_m[m] > 0)
+            assert np.all(f.depth_m[m][valid] < static.depth_m[m][valid]), "a person must be in front"
+            assert not np.array_equal(f.rgb[m], static.rgb[m])
+        assert not static.people_mask.any()
+    assert seen >= 5, f"people visible in only {seen} of {len(frames)} frames"
+
+
+def test_surface_samples_lie_on_the_static_mesh_only():
+    cfg = SimConfig(scene="tiny-01", camera=SMALL_CAM)
+    sim = Simulator(cfg, 0)
+    n_faces = sim.scene.n_faces
+    for _ in range(5):
+        sim.step(Action.TURN_LEFT)
+    pts = sim.surface_samples(2000, np.random.default_rng(0))
+    assert sim.scene.n_faces == n_faces
+    mesh = trimesh.Trimesh(sim.scene.vertices_m, sim.scene.faces, process=False)
+    _, dist, _ = trimesh.proximity.closest_point(mesh, pts[:500])
+    assert dist.max() < 1e-6, f"a sample is {dist.max():.2e} m off the static mesh"
+
+
+def test_freespace_of_a_box_room_is_the_inset_rectangle():
+    box = trimesh.creation.box(extents=(6.0, 4.0, 2.6))
+    box.apply_translation((0, 0, 1.3))
+    box.invert()
+    tri = box.vertices[box.faces]
+    from dynactivegs.sim.scene import FaceColors, Scene, ScenePart
+
+    f = box.faces.astype(np.int32)
+    scene = Scene("box", box.vertices, f, (ScenePart(0, len(f), FaceColors(np.zeros((len(f), 3), np.uint8))),))
+    r = Renderer(scene)
+
+    def down(o):
+        d = np.zeros_like(o)
+        d[:, 2] = -1
+        return r.cast(o, d)[0]
+
+    fs = freespace_from_mesh(tri, down, res_m=0.05)
+    for radius in (0.0, 0.18, 0.3):
+        area = fs.navigable(radius).sum() * 0.05 ** 2
+        expected = (6.0 - 2 * radius) * (4.0 - 2 * radius)
+        assert abs(area - expected) < 0.1 * (6 + 4), f"radius {radius}: {area:.2f} m^2 vs {expected:.2f}"
+    assert not fs.is_navigable(np.array([3.5, 0.0]), 0.0), "outside the room is not free"
