@@ -52,8 +52,10 @@ def test_robot_cannot_pass_through_a_wall():
     cfg = SimConfig(scene="tiny-00", camera=SMALL_CAM, crowd=CrowdConfig(count=0))
     sim = Simulator(cfg, 0)
     room = sim.scene.rooms[0]
+    clear = np.where(sim.freespace.navigable(cfg.robot.radius_m), sim.freespace.clearance_m, 0.0)
+    start = sim.freespace.cell_to_world(np.array(np.unravel_index(np.argmax(clear), clear.shape)))
     for yaw in (0.0, math.pi / 2, math.pi, -math.pi / 2):
-        sim.robot = RobotPose2D((room.x0 + room.x1) / 2, (room.y0 + room.y1) / 2, yaw)
+        sim.robot = RobotPose2D(float(start[0]), float(start[1]), yaw)
         blocked = 0
         for _ in range(60):
             _, truth = sim.step(Action.FORWARD)
