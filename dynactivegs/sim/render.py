@@ -39,8 +39,9 @@ class PeopleMesh:
         return PeopleMesh(np.zeros((0, 3), np.float32), np.zeros((0, 3), np.int32), np.zeros((0, 3), np.uint8))
 
     def pixel_boxes(self, T_world_cam: np.ndarray, K: np.ndarray, width: int, height: int,
-                    near_m: float = 0.05) -> list[tuple[int, int, int, int]]:
-        """Image-space boxes (u0, v0, u1, v1), end-exclusive, that contain each person's projection.
+                    near_m: float = 0.05) -> dict[int, tuple[int, int, int, int]]:
+        """Image-space boxes (u0, v0, u1, v1), end-exclusive, containing the projection of each person
+        that can appear in the image, keyed by person index.
 
         A person with a vertex closer than ``near_m`` in front of (or behind) the camera gets the
         whole image, since its projection is unbounded.
@@ -48,13 +49,13 @@ class PeopleMesh:
         offsets = np.array([0, len(self.vertices_m)]) if self.vertex_offsets is None else self.vertex_offsets
         T_cam_world = np.linalg.inv(T_world_cam)
         pc = self.vertices_m.astype(np.float64) @ T_cam_world[:3, :3].T + T_cam_world[:3, 3]
-        boxes = []
-        for a, b in zip(offsets[:-1], offsets[1:]):
+        boxes = {}
+        for p, (a, b) in enumerate(zip(offsets[:-1], offsets[1:])):
             q = pc[a:b]
             if len(q) == 0 or q[:, 2].max() < near_m:
                 continue
             if q[:, 2].min() < near_m:
-                boxes.append((0, 0, width, height))
+                boxes[p] = (0, 0, width, height)
                 continue
             u = K[0, 0] * q[:, 0] / q[:, 2] + K[0, 2]
             v = K[1, 1] * q[:, 1] / q[:, 2] + K[1, 2]
@@ -62,8 +63,15 @@ class PeopleMesh:
             v0, v1 = int(np.floor(v.min())), int(np.ceil(v.max())) + 1
             u0, v0, u1, v1 = max(u0, 0), max(v0, 0), min(u1, width), min(v1, height)
             if u0 < u1 and v0 < v1:
-                boxes.append((u0, v0, u1, v1))
+                boxes[p] = (u0, v0, u1, v1)
         return boxes
+
+    def faces_of(self, persons: list[int]) -> np.ndarray:
+        """int64 indices of the faces that belong to the given persons."""
+        if self.vertex_offsets is None:
+            return np.arange(len(self.faces))
+        owner = np.searchsorted(self.vertex_offsets, self.faces[:, 0], side="right") - 1
+        return np.flatnonzero(np.isin(owner, persons))
 
 
 @dataclass(frozen=True)
@@ -145,17 +153,20 @@ class Renderer:
         fp = np.full(len(t), -1, dtype=np.int64)
         if people is not None and len(people.faces):
             # Only rays inside the people's projected boxes can hit them.
+            # and only the people whose projection is in the image are put in the BVH.
+            boxes = people.pixel_boxes(T_world_cam, K, width, height)
             near = np.zeros((height, width), dtype=bool)
-            for u0, v0, u1, v1 in people.pixel_boxes(T_world_cam, K, width, height):
+            for u0, v0, u1, v1 in boxes.values():
                 near[v0:v1, u0:u1] = True
             cand = np.flatnonzero(near)
             if len(cand):
-                tp, fpc, _ = _cast(_embree_scene(people.vertices_m[people.faces]), origin, dirs[cand])
+                faces = people.faces_of(list(boxes))
+                tp, fpc, _ = _cast(_embree_scene(people.vertices_m[people.faces[faces]]), origin, dirs[cand])
                 closer = tp < t[cand]
                 hit_idx = cand[closer]
                 person[hit_idx] = True
                 t[hit_idx] = tp[closer]
-                fp[hit_idx] = fpc[closer]
+                fp[hit_idx] = faces[fpc[closer]]
         hit = np.isfinite(t)
         rgb = np.zeros((len(t), 3), dtype=np.float32)
         static_hit = hit & ~person
