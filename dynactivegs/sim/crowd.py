@@ -34,6 +34,7 @@ import numba
 import numpy as np
 from scipy import ndimage, sparse
 from scipy.sparse import csgraph
+from scipy.spatial import cKDTree
 
 from dynactivegs.config import CrowdConfig
 from dynactivegs.errors import ConfigError
@@ -203,6 +204,8 @@ class _PlanGraph:
         n = len(self.cells)
         self.graph = sparse.csr_matrix((np.concatenate(wts), (np.concatenate(rows), np.concatenate(cols))),
                                        shape=(n, n))
+        self._edge_row = np.repeat(np.arange(n), np.diff(self.graph.indptr))
+        self._tree = cKDTree(self.centres_xy_m)
         # nearest coarse node for any coarse cell (people can stand in cells that are not nodes)
         _, near = ndimage.distance_transform_edt(~coarse, return_indices=True)
         self.nearest_id = ids[near[0], near[1]]
@@ -212,9 +215,22 @@ class _PlanGraph:
         ij = np.clip(ij, 0, np.array(self.coarse.shape) - 1)
         return int(self.nearest_id[ij[0], ij[1]])
 
-    def search(self, src: int) -> tuple[np.ndarray, np.ndarray]:
-        """Path lengths (n,) in metres (inf if unreachable) and predecessors (n,) from node ``src``."""
-        dist, pred = csgraph.dijkstra(self.graph, directed=True, indices=src, return_predecessors=True)
+    def search(self, src: int, closed_xy_m: np.ndarray | None = None,
+               closed_radius_m: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Path lengths (n,) in metres (inf if unreachable) and predecessors (n,) from node ``src``.
+
+        Nodes within ``closed_radius_m (K,)`` of ``closed_xy_m (K, 2)`` (except ``src``) are
+        left out of the search.
+        """
+        graph = self.graph
+        if closed_xy_m is not None and len(closed_xy_m):
+            closed = np.zeros(len(self.centres_xy_m), bool)
+            for hits in self._tree.query_ball_point(closed_xy_m, closed_radius_m):
+                closed[hits] = True
+            closed[src] = False
+            data = np.where(closed[self._edge_row] | closed[graph.indices], np.inf, graph.data)
+            graph = sparse.csr_matrix((data, graph.indices, graph.indptr), shape=graph.shape)
+        dist, pred = csgraph.dijkstra(graph, directed=True, indices=src, return_predecessors=True)
         return dist, pred
 
     def path_xy(self, pred: np.ndarray, src: int, dst: int) -> np.ndarray:
@@ -272,6 +288,7 @@ class Crowd:
         self._progress_d = np.full(p, np.inf)
         self._progress_t = np.zeros(p)
         self._blind_s = np.zeros(p)
+        self._goal_tree: list[tuple[int, np.ndarray] | None] = [None] * p
         self._robot_xy, self._robot_r = avoid_xy_m, float(avoid_radius_m)
         for i in range(p):
             self._new_goal(i)
@@ -308,20 +325,15 @@ class Crowd:
         on, so the goal and path lead away from the jam instead of into it.
         """
         src = self._plan.node_of(self._pos[i])
-        graph = self._plan.graph
         if around_people:
-            others = np.delete(self._pos, i, axis=0)
-            discs = [(others, self._radius[i] + np.delete(self._radius, i))]
+            xy = [np.delete(self._pos, i, axis=0)]
+            rr = [self._radius[i] + np.delete(self._radius, i)]
             if self._robot_r > 0:
-                discs.append((self._robot_xy[None], np.array([self._radius[i] + self._robot_r])))
-            free = np.ones(len(self._plan.centres_xy_m), bool)
-            for xy, rr in discs:
-                for c, r in zip(xy, rr):
-                    free &= np.hypot(*(self._plan.centres_xy_m - c).T) >= r
-            free[src] = True
-            keep = sparse.diags(free.astype(np.float64))
-            graph = (keep @ graph @ keep).tocsr()
-        dist, pred = csgraph.dijkstra(graph, directed=True, indices=src, return_predecessors=True)
+                xy.append(self._robot_xy[None])
+                rr.append(np.array([self._radius[i] + self._robot_r]))
+            dist, pred = self._plan.search(src, np.concatenate(xy), np.concatenate(rr))
+        else:
+            dist, pred = self._plan.search(src)
         reachable = np.flatnonzero(np.isfinite(dist))
         straight = np.hypot(*(self._plan.centres_xy_m[reachable] - self._pos[i]).T)
         far = reachable[straight >= self.cfg.min_goal_dist_m]
@@ -333,15 +345,25 @@ class Crowd:
         self._progress_t[i] = self._time_s
 
     def _replan(self, i: int) -> None:
-        """Plan again to the current goal from where the person stands."""
-        goal = self._paths[i][-1]
+        """Plan again to the current goal from where the person stands.
+
+        The shortest-path tree rooted at the goal is computed at the first replan for a
+        goal and reused for later ones (the graph is symmetric, so following predecessors
+        from any node leads to the goal along a shortest path).
+        """
+        goal_node = self._plan.node_of(self._paths[i][-1])
+        if self._goal_tree[i] is None or self._goal_tree[i][0] != goal_node:
+            _, pred = self._plan.search(goal_node)
+            self._goal_tree[i] = (goal_node, pred)
+        pred = self._goal_tree[i][1]
         src = self._plan.node_of(self._pos[i])
-        dst = self._plan.node_of(goal)
-        dist, pred = self._plan.search(src)
-        if not np.isfinite(dist[dst]):
+        if src != goal_node and pred[src] < 0:
             self._new_goal(i)
             return
-        self._set_path(i, self._plan.path_xy(pred, src, dst))
+        nodes = [src]
+        while nodes[-1] != goal_node:
+            nodes.append(int(pred[nodes[-1]]))
+        self._set_path(i, self._plan.centres_xy_m[nodes])
 
     def _set_path(self, i: int, nodes_xy: np.ndarray) -> None:
         pts = np.concatenate([self._pos[i][None], nodes_xy])
