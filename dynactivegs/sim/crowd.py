@@ -265,12 +265,14 @@ class Crowd:
         self._nav = np.ascontiguousarray(freespace.navigable(cfg.radius_m))
         self._origin = freespace.origin_xy_m.astype(np.float64)
         self._res = float(freespace.res_m)
-        self._plan = _PlanGraph(self._nav, self._res, self._origin)
+        count = cfg.count if cfg.count >= 0 else max(1, int(freespace.free_area_m2() // cfg.area_per_person_m2))
+        self._plan = _PlanGraph(self._nav, self._res, self._origin) if count > 0 else None
         self._obstacles = ObstacleIndex.build(_obstacle_boundary_xy(freespace), cell_m=1.0)
-        # a navigable position is at least r + res/2 - res/sqrt(2) from every blocked cell centre
+        # ORCA's static discs sit on blocked-cell centres; a navigable position is at least
+        # r + res/2 - res/sqrt(2) from every one of them, so that is the combined radius used
+        # (the hard guard, not ORCA, enforces navigability exactly)
         self._obstacle_radius_m = self._res * (0.5 - math.sqrt(0.5))
 
-        count = cfg.count if cfg.count >= 0 else max(1, int(freespace.free_area_m2() // cfg.area_per_person_m2))
         self._pos = self._spawn(count, avoid_xy_m, float(avoid_radius_m))
         p = len(self._pos)
         self._radius = np.full(p, cfg.radius_m)

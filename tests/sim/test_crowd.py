@@ -81,6 +81,10 @@ def test_empty_crowd_steps_and_meshes():
     v, f, c = crowd.mesh()
     assert v.shape == (0, 3) and f.shape == (0, 3) and crowd.time_s == 0.5
     assert not crowd.overlaps_disc(np.zeros(2), 1.0)
+    closet = FreeSpace.from_grid(_walled(0.4, 0.4), RES)          # too narrow for anybody
+    assert len(Crowd(CrowdConfig(count=0), closet, np.random.default_rng(0), np.zeros(2), ROBOT_R)) == 0
+    with pytest.raises(ConfigError, match="radius"):
+        Crowd(CrowdConfig(count=1), closet, np.random.default_rng(0), np.zeros(2), ROBOT_R)
 
 
 def test_too_many_people_is_a_clear_error():
