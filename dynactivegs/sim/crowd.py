@@ -17,8 +17,10 @@ full-resolution navigable grid. Per substep:
    otherwise a move along only x or only y is tried, else the person stays put. Hence
    people never walk into walls, furniture, each other or the robot, whatever ORCA says.
 
-A person who makes no progress toward its waypoint for ``cfg.stuck_timeout_s`` picks a
-new goal; one whose waypoint stays out of sight for a second replans to the same goal.
+A person whose remaining path length does not shrink for ``cfg.stuck_timeout_s`` picks a
+new goal, planned on a graph from which the cells other people and the robot stand on are
+removed (so someone jammed at a door turns away from the jam); one whose waypoint stays
+out of sight for a second replans to the same goal.
 The gait phase advances by 2 pi per stride of walked distance (stride proportional to
 height) and the heading turns smoothly toward the walking direction.
 
