@@ -40,7 +40,7 @@ from scipy.spatial import cKDTree
 
 from dynactivegs.config import CrowdConfig
 from dynactivegs.errors import ConfigError
-from dynactivegs.sim.freespace import FreeSpace
+from dynactivegs.sim.freespace import FreeSpace, grid_graph
 from dynactivegs.sim.humans import HumanLook, people_mesh, sample_look, stride_length_m
 from dynactivegs.sim.orca import ObstacleIndex, orca_velocities
 
@@ -184,28 +184,9 @@ class _PlanGraph:
         ids = -np.ones(coarse.shape, np.int64)
         ids[coarse] = np.arange(int(coarse.sum()))
         self.ids = ids
-        self.cells = np.argwhere(coarse)                       # (n, 2) row, col
+        self.graph, self.cells = grid_graph(coarse, self.cell_m)    # cells: (n, 2) row, col
         self.centres_xy_m = origin_xy_m + (self.cells[:, ::-1] + 0.5) * self.cell_m
-        rows, cols, wts = [], [], []
-        for di, dj in ((0, 1), (1, 0), (1, 1), (1, -1)):
-            a = coarse[max(0, -di):hc - max(0, di), max(0, -dj):wc - max(0, dj)]
-            b = coarse[max(0, di):, max(0, dj):][:a.shape[0], :a.shape[1]]
-            ok = a & b
-            if di and dj:                                      # no cutting corners
-                c1 = coarse[max(0, di):, max(0, -dj):wc - max(0, dj)][:a.shape[0], :a.shape[1]]
-                c2 = coarse[max(0, -di):hc - max(0, di), max(0, dj):][:a.shape[0], :a.shape[1]]
-                ok &= c1 & c2
-            ii, jj = np.nonzero(ok)
-            ii, jj = ii + max(0, -di), jj + max(0, -dj)
-            u = ids[ii, jj]
-            v = ids[ii + di, jj + dj]
-            wgt = np.full(len(u), math.hypot(di, dj) * self.cell_m)
-            rows += [u, v]
-            cols += [v, u]
-            wts += [wgt, wgt]
         n = len(self.cells)
-        self.graph = sparse.csr_matrix((np.concatenate(wts), (np.concatenate(rows), np.concatenate(cols))),
-                                       shape=(n, n))
         self._edge_row = np.repeat(np.arange(n), np.diff(self.graph.indptr))
         self._tree = cKDTree(self.centres_xy_m)
         # nearest coarse node for any coarse cell (people can stand in cells that are not nodes)

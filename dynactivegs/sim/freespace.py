@@ -12,8 +12,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import math
+
 import numpy as np
-from scipy import ndimage
+from scipy import ndimage, sparse
 from scipy.spatial import cKDTree
 
 
@@ -128,7 +130,7 @@ class FreeSpace:
         return self._cached("obstacle_points", compute)
 
     def sample_navigable(self, rng: np.random.Generator, n: int, radius_m: float) -> np.ndarray:
-        """float64 (n, 2): uniformly random points (cell centre plus jitter) where a disc of ``radius_m`` fits."""
+        """float64 (n, 2): centres of uniformly random cells where a disc of ``radius_m`` fits."""
         cells = np.argwhere(self.navigable(radius_m))
         if len(cells) == 0:
             raise ValueError(f"no navigable cell for radius {radius_m} m")
@@ -236,3 +238,32 @@ def freespace_from_mesh(triangles_m: np.ndarray, cast_down, *, res_m: float = 0.
     key = np.unique(q[:, 0] * (1 << 31) + q[:, 1])
     obstacle_xy = (np.stack([key >> 31, key & ((1 << 31) - 1)], axis=1) * 0.01 + origin).astype(np.float32)
     return FreeSpace(origin, res_m, floor, occupied, obstacle_xy)
+
+
+def grid_graph(mask: np.ndarray, cell_m: float) -> tuple[sparse.csr_matrix, np.ndarray]:
+    """8-connected graph over the True cells of ``mask`` (H, W), without cutting corners.
+
+    Returns the symmetric adjacency matrix (n, n) with edge lengths in metres, and the cells
+    (n, 2) as (row, col): node k is cell ``cells[k]`` (row-major order). A diagonal edge exists
+    only when both cells it passes between are True, so paths never squeeze between two
+    blocked cells that touch at a corner.
+    """
+    assert mask.ndim == 2 and mask.dtype == np.bool_
+    h, w = mask.shape
+    ids = -np.ones((h, w), np.int64)
+    ids[mask] = np.arange(int(mask.sum()))
+    rows, cols, wts = [], [], []
+    for di, dj in ((0, 1), (1, 0), (1, 1), (1, -1)):
+        j0, j1 = max(0, -dj), w - max(0, dj)          # columns of the first cell of each pair
+        ok = mask[:h - di, j0:j1] & mask[di:, j0 + dj:j1 + dj]
+        if di and dj:
+            ok &= mask[di:, j0:j1] & mask[:h - di, j0 + dj:j1 + dj]
+        a = ids[:h - di, j0:j1][ok]
+        b = ids[di:, j0 + dj:j1 + dj][ok]
+        length = np.full(len(a), math.hypot(di, dj) * cell_m)
+        rows += [a, b]
+        cols += [b, a]
+        wts += [length, length]
+    n = int(mask.sum())
+    graph = sparse.csr_matrix((np.concatenate(wts), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+    return graph, np.argwhere(mask)

@@ -10,28 +10,10 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from dynactivegs.sim.freespace import FreeSpace
+from dynactivegs.sim.freespace import FreeSpace, grid_graph
 from dynactivegs.sim.robot import Action, wrap_angle
-
-
-def grid_graph(mask: np.ndarray, res_m: float) -> csr_matrix:
-    """8-connected graph over the True cells of ``mask`` (H, W); node id = row * W + col, weights in metres."""
-    h, w = mask.shape
-    rows, cols, wts = [], [], []
-    ids = np.arange(h * w).reshape(h, w)
-    for di, dj in ((0, 1), (1, 0), (1, 1), (1, -1)):
-        j0, j1 = max(0, -dj), w - max(0, dj)          # columns of the first cell of each pair
-        both = mask[:h - di, j0:j1] & mask[di:, j0 + dj:j1 + dj]
-        ia = ids[:h - di, j0:j1][both]
-        ib = ia + di * w + dj
-        rows += [ia, ib]
-        cols += [ib, ia]
-        wts += [np.full(2 * len(ia), res_m * math.hypot(di, dj))]
-    r = np.concatenate(rows)
-    return csr_matrix((np.concatenate(wts), (r, np.concatenate(cols))), shape=(h * w, h * w))
 
 
 class ScriptedDriver:
@@ -48,28 +30,21 @@ class ScriptedDriver:
         self.mask = freespace.navigable(radius_m + freespace.res_m)
         if not self.mask.any():
             self.mask = freespace.navigable(radius_m)
-        self.graph = grid_graph(self.mask, freespace.res_m)
+        self.graph, self.cells = grid_graph(self.mask, freespace.res_m)
         self.path: list[np.ndarray] = []
 
     def _plan(self, xy: np.ndarray) -> None:
-        h, w = self.mask.shape
-        cells = np.argwhere(self.mask)
-        start = self.fs.world_to_cell(xy)
-        if not self.mask[start[0], start[1]]:
-            d2 = ((cells - start) ** 2).sum(axis=1)
-            start = cells[np.argmin(d2)]
-        dist, pred = dijkstra(self.graph, indices=int(start[0] * w + start[1]), return_predecessors=True)
-        reach = cells[np.isfinite(dist[cells[:, 0] * w + cells[:, 1]])]
-        far = reach[np.linalg.norm(self.fs.cell_to_world(reach) - xy, axis=1) >= self.min_goal]
+        start = int(np.argmin(((self.cells - self.fs.world_to_cell(xy)) ** 2).sum(axis=1)))
+        dist, pred = dijkstra(self.graph, indices=start, return_predecessors=True)
+        reach = np.flatnonzero(np.isfinite(dist))
+        far = reach[np.linalg.norm(self.fs.cell_to_world(self.cells[reach]) - xy, axis=1) >= self.min_goal]
         pool = far if len(far) else reach
-        goal = pool[self.rng.integers(len(pool))]
-        node = int(goal[0] * w + goal[1])
+        node = int(pool[self.rng.integers(len(pool))])
         chain = []
-        while node >= 0 and node != start[0] * w + start[1]:
+        while node >= 0 and node != start:
             chain.append(node)
             node = int(pred[node])
-        chain = chain[::-1]
-        pts = self.fs.cell_to_world(np.stack([np.array(chain) // w, np.array(chain) % w], axis=1)) if chain else []
+        pts = self.fs.cell_to_world(self.cells[chain[::-1]]) if chain else np.zeros((0, 2))
         self.path = list(pts[::5]) + ([pts[-1]] if len(pts) else [])
 
     def act(self, x_m: float, y_m: float, yaw_rad: float, blocked: bool = False) -> Action:

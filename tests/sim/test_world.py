@@ -152,3 +152,22 @@ def test_freespace_of_a_box_room_is_the_inset_rectangle():
         expected = (6.0 - 2 * radius) * (4.0 - 2 * radius)
         assert abs(area - expected) < 0.1 * (6 + 4), f"radius {radius}: {area:.2f} m^2 vs {expected:.2f}"
     assert not fs.is_navigable(np.array([3.5, 0.0]), 0.0), "outside the room is not free"
+
+
+def test_grid_graph_connects_8_neighbours_without_cutting_corners():
+    from scipy.sparse.csgraph import dijkstra
+
+    from dynactivegs.sim.freespace import grid_graph
+
+    g, cells = grid_graph(np.ones((3, 4), bool), 1.0)
+    assert g.nnz == 2 * (9 + 8 + 12)            # horizontal, vertical, diagonal pairs
+    mask = np.array([[1, 0], [0, 1]], bool)     # two cells touching only at a corner
+    g, cells = grid_graph(mask, 0.5)
+    assert g.nnz == 0
+    mask = np.ones((5, 5), bool)
+    mask[1:4, 2] = False                        # a wall with gaps at both ends
+    g, cells = grid_graph(mask, 1.0)
+    node = {tuple(c): k for k, c in enumerate(cells)}
+    d = dijkstra(g, indices=node[(2, 0)])[node[(2, 4)]]
+    # up past the wall's end and down again; diagonals next to the wall's end are not allowed
+    assert abs(d - (4 + 2 * 2 ** 0.5)) < 1e-9, f"around the wall: {d}"
