@@ -100,8 +100,8 @@ class CrowdConfig:
     """ORCA: time horizon for static obstacles."""
     substep_s: float = 0.1
     """Crowd integration step; a simulator step is split into substeps of at most this length."""
-    stuck_timeout_s: float = 8.0
-    """A person that makes no progress toward its waypoint for this long picks a new goal."""
+    stuck_timeout_s: float = 3.0
+    """A person whose remaining path stops shrinking for this long picks a new goal (breaks door jams)."""
 
     def __post_init__(self) -> None:
         _require(self.count >= -1, "crowd.count", self.count, ">= 0, or -1 for the area rule")
