@@ -1,0 +1,343 @@
+"""A 2D occupancy grid of what the robot has seen, updated from RGB-D frames.
+
+The grid holds log-odds per floor cell. It is the map that the Voronoi graph, subregions
+and planner are built on (DESIGN.md §5 Selection: "a 2D occupancy map of the static scene;
+people's returns are not made permanent obstacles").
+
+Grid convention (the same as :mod:`dynactivegs.sim.freespace`): cell ``(i, j)`` (row ``i``
+along +y, column ``j`` along +x) covers ``[x0 + j r, x0 + (j+1) r) x [y0 + i r, y0 + (i+1) r)``
+with ``(x0, y0) = origin_xy_m`` and ``r = cell_m``; its centre is at
+``origin + (j + 0.5, i + 0.5) r``. The origin is always an integer multiple of ``cell_m``
+(stored as integer cell offsets) so that growing the grid never shifts cell boundaries.
+
+Update rule for one frame (see :func:`update_occupancy`):
+
+- Each valid pixel (depth > 0, within ``max_range_m``) is back-projected to a world point.
+- Its ray's ground projection, from the camera's cell to the point's cell, is *seen free*.
+- Points lower than ``band_lo_m`` are floor: their own cell is seen free too.
+- Points inside the body's height band ``[band_lo_m, band_hi_m]`` are obstacles: their cell
+  is *seen occupied*, unless the pixel's uncertainty ``beta`` exceeds ``beta_max`` (probably
+  a moving person): such a return still clears the cells before it but adds no occupancy.
+- Points above the band (ceiling, wall tops) clear the cells before them; their own cell is
+  left as it is.
+- Per frame a cell gets at most one update: ``+l_occ`` if seen occupied (occupied wins
+  over free), else ``+l_free`` if seen free. Log-odds are clamped to
+  ``[logodds_min, logodds_max]``. Counting per frame rather than per ray makes the result
+  independent of the ray order and of the pixel density.
+
+Known limitation: the ground projection of a ray that passes *over* a low obstacle (a seat
+under a ray that ends on the far floor) marks that obstacle's cell free; obstacles recover
+because ``l_occ`` outweighs ``l_free`` and they are hit from other views.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import IntEnum
+
+import numba
+import numpy as np
+
+from dynactivegs.errors import ConfigError
+
+
+def _require(cond: bool, name: str, value: object, allowed: str) -> None:
+    if not cond:
+        raise ConfigError(f"bad config value {name}={value!r}: must be {allowed}")
+
+
+class CellState(IntEnum):
+    """What a cell of the occupancy grid is believed to be."""
+
+    UNKNOWN = 0
+    FREE = 1
+    OCCUPIED = 2
+
+
+@dataclass(frozen=True, slots=True)
+class OccupancyConfig:
+    """How RGB-D frames update the 2D occupancy grid."""
+
+    cell_m: float = 0.05
+    """Cell size in metres."""
+    band_lo_m: float = 0.1
+    """Points lower than this above the floor are floor (free); the obstacle band starts here."""
+    band_hi_m: float = 1.5
+    """Points between band_lo_m and this height are obstacles for the robot's body."""
+    max_range_m: float = 6.0
+    """Returns farther than this (horizontal distance) are cut: the ray is free up to this range, no endpoint."""
+    beta_max: float = 0.5
+    """Pixels whose uncertainty beta is above this are treated as dynamic: they clear space but add no occupancy."""
+    l_free: float = -0.4
+    """Log-odds added to a cell seen free in a frame."""
+    l_occ: float = 0.85
+    """Log-odds added to a cell seen occupied in a frame."""
+    logodds_min: float = -2.0
+    """Lower clamp of the log-odds (lets a wrongly free cell become occupied again in a few frames)."""
+    logodds_max: float = 3.5
+    """Upper clamp of the log-odds (lets a wrongly occupied cell, e.g. a person, be cleared in a few frames)."""
+    free_below: float = -0.2
+    """A cell with log-odds below this is FREE."""
+    occupied_above: float = 0.2
+    """A cell with log-odds above this is OCCUPIED; in between is UNKNOWN."""
+    pixel_stride: int = 1
+    """Use every n-th pixel in both image directions (1 = all pixels)."""
+    grow_chunk_m: float = 2.0
+    """When a frame reaches beyond the grid, the grid grows to the enclosing multiple of this many metres."""
+
+    def __post_init__(self) -> None:
+        _require(0.005 <= self.cell_m <= 1.0, "occupancy.cell_m", self.cell_m, "in [0.005, 1] m")
+        _require(0.0 <= self.band_lo_m < self.band_hi_m, "occupancy.band_lo_m", self.band_lo_m,
+                 ">= 0 and below occupancy.band_hi_m")
+        _require(self.max_range_m > 0.0, "occupancy.max_range_m", self.max_range_m, "> 0 m")
+        _require(self.beta_max > 0.0, "occupancy.beta_max", self.beta_max, "> 0")
+        _require(self.l_free < 0.0, "occupancy.l_free", self.l_free, "< 0")
+        _require(self.l_occ > 0.0, "occupancy.l_occ", self.l_occ, "> 0")
+        _require(self.logodds_min < self.free_below, "occupancy.logodds_min", self.logodds_min,
+                 "below occupancy.free_below")
+        _require(self.free_below <= 0.0 <= self.occupied_above, "occupancy.free_below", self.free_below,
+                 "<= 0 <= occupancy.occupied_above")
+        _require(self.occupied_above < self.logodds_max, "occupancy.logodds_max", self.logodds_max,
+                 "above occupancy.occupied_above")
+        _require(1 <= self.pixel_stride <= 64, "occupancy.pixel_stride", self.pixel_stride, "in [1, 64]")
+        _require(self.grow_chunk_m >= self.cell_m, "occupancy.grow_chunk_m", self.grow_chunk_m, ">= occupancy.cell_m")
+
+
+@dataclass(frozen=True, slots=True)
+class OccupancyGrid:
+    """Log-odds occupancy of floor cells. Immutable: updates return a new grid."""
+
+    origin_ij: tuple[int, int]    # (row, col) offset of cell (0, 0) in cell units: origin_xy = (col, row) * cell_m
+    cell_m: float
+    logodds: np.ndarray           # float32 (H, W); 0 = never seen
+
+    def __post_init__(self) -> None:
+        assert self.logodds.ndim == 2 and self.logodds.dtype == np.float32
+        self.logodds.flags.writeable = False
+
+    # ------------------------------------------------------------------ construction
+    @staticmethod
+    def empty(cell_m: float) -> "OccupancyGrid":
+        """A grid with no cells; the first update allocates what it needs."""
+        return OccupancyGrid((0, 0), float(cell_m), np.zeros((0, 0), np.float32))
+
+    @staticmethod
+    def allocate(lo_xy_m, hi_xy_m, cell_m: float) -> "OccupancyGrid":
+        """An all-unknown grid covering at least the box ``[lo, hi]`` (xy, metres), aligned to ``cell_m``."""
+        lo = np.asarray(lo_xy_m, np.float64)
+        hi = np.asarray(hi_xy_m, np.float64)
+        assert lo.shape == (2,) and hi.shape == (2,) and np.all(hi >= lo)
+        j0, i0 = np.floor(lo / cell_m).astype(np.int64)
+        j1, i1 = np.ceil(hi / cell_m).astype(np.int64)
+        h, w = max(int(i1 - i0), 1), max(int(j1 - j0), 1)
+        return OccupancyGrid((int(i0), int(j0)), float(cell_m), np.zeros((h, w), np.float32))
+
+    # ------------------------------------------------------------------ coordinates
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.logodds.shape  # type: ignore[return-value]
+
+    @property
+    def origin_xy_m(self) -> np.ndarray:
+        """float64 (2,): world xy of the grid's lower-left corner."""
+        return np.array([self.origin_ij[1], self.origin_ij[0]], np.float64) * self.cell_m
+
+    def world_to_cell(self, xy_m: np.ndarray) -> np.ndarray:
+        """int64 (..., 2) (row, col) of the cells containing world points ``xy_m (..., 2)``; may be out of range."""
+        g = np.floor(np.asarray(xy_m, np.float64) / self.cell_m).astype(np.int64)
+        return np.stack([g[..., 1] - self.origin_ij[0], g[..., 0] - self.origin_ij[1]], axis=-1)
+
+    def cell_to_world(self, ij: np.ndarray) -> np.ndarray:
+        """float64 (..., 2) world xy of the centres of cells ``ij (..., 2)`` given as (row, col)."""
+        ij = np.asarray(ij)
+        return self.origin_xy_m + (ij[..., ::-1].astype(np.float64) + 0.5) * self.cell_m
+
+    def in_bounds(self, ij: np.ndarray) -> np.ndarray:
+        h, w = self.shape
+        return (ij[..., 0] >= 0) & (ij[..., 0] < h) & (ij[..., 1] >= 0) & (ij[..., 1] < w)
+
+    # ------------------------------------------------------------------ classification
+    def states(self, cfg: OccupancyConfig) -> np.ndarray:
+        """uint8 (H, W) of :class:`CellState` values."""
+        out = np.full(self.shape, CellState.UNKNOWN, np.uint8)
+        out[self.logodds < cfg.free_below] = CellState.FREE
+        out[self.logodds > cfg.occupied_above] = CellState.OCCUPIED
+        return out
+
+    def free(self, cfg: OccupancyConfig) -> np.ndarray:
+        """bool (H, W): cells believed free."""
+        return self.logodds < cfg.free_below
+
+    def occupied(self, cfg: OccupancyConfig) -> np.ndarray:
+        """bool (H, W): cells believed occupied."""
+        return self.logodds > cfg.occupied_above
+
+    def unknown(self, cfg: OccupancyConfig) -> np.ndarray:
+        """bool (H, W): cells neither believed free nor occupied."""
+        return ~self.free(cfg) & ~self.occupied(cfg)
+
+    # ------------------------------------------------------------------ growth
+    def grown_to_include(self, lo_xy_m: np.ndarray, hi_xy_m: np.ndarray, chunk_m: float) -> "OccupancyGrid":
+        """This grid, enlarged (new cells unknown) so that it covers ``[lo, hi]``.
+
+        New bounds snap outwards to multiples of ``chunk_m`` (rounded to whole cells), so
+        that a robot moving slowly outwards does not reallocate the grid every frame.
+        Returns ``self`` when nothing needs to change.
+        """
+        chunk = max(1, int(round(chunk_m / self.cell_m)))
+        g_lo = np.floor(np.asarray(lo_xy_m, np.float64) / self.cell_m).astype(np.int64)   # (col, row)
+        g_hi = np.floor(np.asarray(hi_xy_m, np.float64) / self.cell_m).astype(np.int64) + 1
+        h, w = self.shape
+        i0, j0 = self.origin_ij
+        if h and w and g_lo[1] >= i0 and g_lo[0] >= j0 and g_hi[1] <= i0 + h and g_hi[0] <= j0 + w:
+            return self
+        n_i0 = (int(g_lo[1]) // chunk) * chunk
+        n_j0 = (int(g_lo[0]) // chunk) * chunk
+        n_i1 = -((-int(g_hi[1])) // chunk) * chunk
+        n_j1 = -((-int(g_hi[0])) // chunk) * chunk
+        if h and w:
+            n_i0, n_j0 = min(n_i0, i0), min(n_j0, j0)
+            n_i1, n_j1 = max(n_i1, i0 + h), max(n_j1, j0 + w)
+        out = np.zeros((n_i1 - n_i0, n_j1 - n_j0), np.float32)
+        if h and w:
+            out[i0 - n_i0:i0 - n_i0 + h, j0 - n_j0:j0 - n_j0 + w] = self.logodds
+        return OccupancyGrid((n_i0, n_j0), self.cell_m, out)
+
+
+@dataclass(frozen=True, slots=True)
+class FrameRays:
+    """The 2D rays of one frame in grid coordinates (continuous cell units: x = col, y = row)."""
+
+    start_g: np.ndarray           # float64 (2,) camera position, (x, y) in cell units of the grid
+    end_g: np.ndarray             # float64 (N, 2) ray ends, (x, y) in cell units of the grid
+    end_free: np.ndarray          # bool (N,) the end cell itself is seen free (floor return)
+    end_occupied: np.ndarray      # bool (N,) the end cell is seen occupied (static obstacle return)
+
+
+def backproject(depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, stride: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """World points of the valid pixels of a depth image.
+
+    ``depth_m`` float32 (H, W) z-depth, 0 = no return; ``K`` (3, 3) with pixel centres at
+    +0.5; ``T_world_cam`` (4, 4). Returns float64 (N, 3) world points and int64 (N,) flat pixel
+    indices (row-major into (H, W)) of the pixels used (every ``stride``-th row and column).
+    """
+    assert depth_m.ndim == 2 and K.shape == (3, 3) and T_world_cam.shape == (4, 4)
+    h, w = depth_m.shape
+    rows = np.arange(0, h, stride)
+    cols = np.arange(0, w, stride)
+    d = depth_m[np.ix_(rows, cols)].astype(np.float64)
+    ok = np.isfinite(d) & (d > 0)
+    r_idx, c_idx = np.nonzero(ok)
+    z = d[r_idx, c_idx]
+    v = rows[r_idx] + 0.5
+    u = cols[c_idx] + 0.5
+    x = (u - K[0, 2] - K[0, 1] * (v - K[1, 2]) / K[1, 1]) / K[0, 0] * z
+    y = (v - K[1, 2]) / K[1, 1] * z
+    p_cam = np.stack([x, y, z], axis=1)
+    p_world = p_cam @ T_world_cam[:3, :3].T + T_world_cam[:3, 3]
+    return p_world, rows[r_idx] * w + cols[c_idx]
+
+
+def frame_rays(grid: OccupancyGrid, cfg: OccupancyConfig, depth_m: np.ndarray, K: np.ndarray,
+               T_world_cam: np.ndarray, beta: np.ndarray) -> tuple[OccupancyGrid, FrameRays]:
+    """Classify the frame's returns and express the rays in the (grown if needed) grid's coordinates.
+
+    ``beta`` float32 (H, W): per-pixel uncertainty, high on probably-moving things. The grid
+    is returned grown to contain the camera and all ray ends (log-odds unchanged).
+    """
+    assert beta.shape == depth_m.shape, f"beta {beta.shape} must match depth {depth_m.shape}"
+    pts, pix = backproject(depth_m, K, T_world_cam, cfg.pixel_stride)
+    cam_xy = T_world_cam[:2, 3].astype(np.float64)
+    delta = pts[:, :2] - cam_xy
+    dist = np.hypot(delta[:, 0], delta[:, 1])
+    far = dist > cfg.max_range_m
+    scale = np.where(far, cfg.max_range_m / np.maximum(dist, 1e-12), 1.0)
+    end_xy = cam_xy + delta * scale[:, None]
+    z = pts[:, 2]
+    dynamic = beta.reshape(-1)[pix] > cfg.beta_max
+    end_free = (z < cfg.band_lo_m) & ~far
+    end_occ = (z >= cfg.band_lo_m) & (z <= cfg.band_hi_m) & ~far & ~dynamic
+    lo = np.minimum(end_xy.min(axis=0), cam_xy) if len(end_xy) else cam_xy
+    hi = np.maximum(end_xy.max(axis=0), cam_xy) if len(end_xy) else cam_xy
+    grid = grid.grown_to_include(lo, hi, cfg.grow_chunk_m)
+    off = np.array([grid.origin_ij[1], grid.origin_ij[0]], np.float64)
+    return grid, FrameRays(cam_xy / grid.cell_m - off, end_xy / grid.cell_m - off, end_free, end_occ)
+
+
+@numba.njit(cache=True, nogil=True)
+def _trace_free(start_g, end_g, end_free, seen_free):  # pragma: no cover - compiled
+    """Amanatides-Woo traversal of every segment start -> end_k; marks the cells it passes as free.
+
+    The end cell is marked only where ``end_free[k]``. The number of cells of an exact
+    traversal is 1 + |di| + |dj|, so the loop runs exactly that many steps (robust to round-off).
+    """
+    h, w = seen_free.shape
+    x0, y0 = start_g[0], start_g[1]
+    ci0, cj0 = int(math.floor(y0)), int(math.floor(x0))
+    for k in range(end_g.shape[0]):
+        x1, y1 = end_g[k, 0], end_g[k, 1]
+        ei, ej = int(math.floor(y1)), int(math.floor(x1))
+        dx, dy = x1 - x0, y1 - y0
+        sj = 1 if dx > 0 else -1
+        si = 1 if dy > 0 else -1
+        tdx = abs(1.0 / dx) if dx != 0 else np.inf
+        tdy = abs(1.0 / dy) if dy != 0 else np.inf
+        if dx > 0:
+            tmx = (cj0 + 1 - x0) / dx
+        elif dx < 0:
+            tmx = (cj0 - x0) / dx
+        else:
+            tmx = np.inf
+        if dy > 0:
+            tmy = (ci0 + 1 - y0) / dy
+        elif dy < 0:
+            tmy = (ci0 - y0) / dy
+        else:
+            tmy = np.inf
+        n = abs(ei - ci0) + abs(ej - cj0)
+        i, j = ci0, cj0
+        for s in range(n + 1):
+            if s == n and not end_free[k]:
+                break
+            if 0 <= i < h and 0 <= j < w:
+                seen_free[i, j] = True
+            if tmx < tmy:
+                tmx += tdx
+                j += sj
+            else:
+                tmy += tdy
+                i += si
+    # the camera's own cell is always free
+    if 0 <= ci0 < h and 0 <= cj0 < w:
+        seen_free[ci0, cj0] = True
+
+
+def seen_masks(shape: tuple[int, int], rays: FrameRays) -> tuple[np.ndarray, np.ndarray]:
+    """bool (H, W) cells seen free and seen occupied by the rays of one frame (fast kernel)."""
+    seen_free = np.zeros(shape, np.bool_)
+    _trace_free(rays.start_g, np.ascontiguousarray(rays.end_g), rays.end_free, seen_free)
+    seen_occ = np.zeros(shape, np.bool_)
+    e = rays.end_g[rays.end_occupied]
+    seen_occ[np.floor(e[:, 1]).astype(np.int64), np.floor(e[:, 0]).astype(np.int64)] = True
+    return seen_free, seen_occ
+
+
+def apply_seen(logodds: np.ndarray, seen_free: np.ndarray, seen_occ: np.ndarray, cfg: OccupancyConfig) -> np.ndarray:
+    """float32 (H, W): one frame's log-odds update (occupied wins over free), clamped."""
+    delta = np.where(seen_occ, np.float32(cfg.l_occ), np.where(seen_free, np.float32(cfg.l_free), np.float32(0.0)))
+    return np.clip(logodds + delta, np.float32(cfg.logodds_min), np.float32(cfg.logodds_max)).astype(np.float32)
+
+
+def update_occupancy(grid: OccupancyGrid, cfg: OccupancyConfig, depth_m: np.ndarray, K: np.ndarray,
+                     T_world_cam: np.ndarray, beta: np.ndarray) -> OccupancyGrid:
+    """The grid after integrating one RGB-D frame (see the module docstring for the rule).
+
+    ``depth_m`` float32 (H, W) z-depth in metres (0 = no return); ``K`` float64 (3, 3);
+    ``T_world_cam`` float64 (4, 4) camera -> world; ``beta`` float32 (H, W) uncertainty.
+    The grid grows when the frame reaches beyond it. Pure: ``grid`` is not modified.
+    """
+    assert abs(grid.cell_m - cfg.cell_m) < 1e-12, "grid and config cell sizes differ"
+    grid, rays = frame_rays(grid, cfg, depth_m, K, T_world_cam, beta)
+    seen_free, seen_occ = seen_masks(grid.shape, rays)
+    return OccupancyGrid(grid.origin_ij, grid.cell_m, apply_seen(grid.logodds, seen_free, seen_occ, cfg))

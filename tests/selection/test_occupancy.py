@@ -1,0 +1,141 @@
+"""Occupancy grid: fast traversal vs. reference, what a frame marks, people, growth, config."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from dynactivegs.errors import ConfigError
+from dynactivegs.rng import derive_rng
+from dynactivegs.selection._reference import update_occupancy_reference
+from dynactivegs.selection.occupancy import CellState, OccupancyConfig, OccupancyGrid, update_occupancy
+
+from tests.selection.scenes import intrinsics, render_depth, view
+
+CFG = OccupancyConfig(cell_m=0.1)
+
+
+def _random_frame(rng: np.random.Generator, w: int, h: int):
+    depth = rng.uniform(0.15, 9.0, size=(h, w)).astype(np.float32)
+    depth[rng.random((h, w)) < 0.15] = 0.0                     # no returns
+    yaw = rng.uniform(-math.pi, math.pi)
+    T = view(rng.uniform(-3, 3), rng.uniform(-3, 3), yaw, rng.uniform(0.3, 1.8))
+    tilt = rng.normal(0.0, 0.2)                                # pitch the camera about its x axis
+    R = np.array([[1, 0, 0], [0, math.cos(tilt), -math.sin(tilt)], [0, math.sin(tilt), math.cos(tilt)]])
+    T[:3, :3] = T[:3, :3] @ R
+    K = intrinsics(w, h, rng.uniform(60, 110), rng.uniform(40, 80))
+    beta = rng.uniform(0.0, 1.0, size=(h, w)).astype(np.float32)
+    return depth, K, T, beta
+
+
+def test_fast_update_equals_reference_on_seeded_random_frames():
+    # Exact equality: both mark the same cell sets; ties (a ray through a cell corner) have
+    # probability zero with random float poses.
+    rng = derive_rng(0, "test-occupancy-twin")
+    for trial in range(6):
+        grid_fast = grid_ref = OccupancyGrid.empty(CFG.cell_m)
+        for _ in range(3):
+            depth, K, T, beta = _random_frame(rng, 14, 9)
+            grid_fast = update_occupancy(grid_fast, CFG, depth, K, T, beta)
+            grid_ref = update_occupancy_reference(grid_ref, CFG, depth, K, T, beta)
+            assert grid_fast.origin_ij == grid_ref.origin_ij
+            np.testing.assert_array_equal(grid_fast.logodds, grid_ref.logodds)
+        assert (grid_fast.logodds != 0).sum() > 50
+
+
+def test_degenerate_frames_no_returns_and_points_in_the_camera_cell():
+    rng = derive_rng(1, "test-occupancy-degenerate")
+    _, K, T, beta = _random_frame(rng, 8, 6)
+    empty = np.zeros((6, 8), np.float32)
+    g = update_occupancy(OccupancyGrid.empty(CFG.cell_m), CFG, empty, K, T, beta)
+    assert (g.logodds != 0).sum() == 1                         # only the camera's own cell is seen (free)
+    near = np.full((6, 8), 0.01, np.float32)                   # every return lands in or next to the camera's cell
+    g2 = update_occupancy(OccupancyGrid.empty(CFG.cell_m), CFG, near, K, T, beta)
+    g2r = update_occupancy_reference(OccupancyGrid.empty(CFG.cell_m), CFG, near, K, T, beta)
+    np.testing.assert_array_equal(g2.logodds, g2r.logodds)
+
+
+def _room_frame(boxes=(), x=1.0, y=1.5, yaw=0.0, w=64, h=36):
+    K = intrinsics(w, h)
+    T = view(x, y, yaw)
+    depth, which = render_depth(T, K, w, h, (4.0, 3.0), list(boxes))
+    return depth, K, T, which
+
+
+def test_a_room_view_marks_floor_free_walls_occupied_and_behind_the_camera_unknown():
+    depth, K, T, _ = _room_frame()
+    beta = np.zeros_like(depth)
+    g = OccupancyGrid.empty(CFG.cell_m)
+    for _ in range(2):
+        g = update_occupancy(g, CFG, depth, K, T, beta)
+    st = g.states(CFG)
+    at = lambda x, y: st[tuple(g.world_to_cell(np.array([x, y])))]
+    assert at(2.5, 1.5) == CellState.FREE                      # floor ahead
+    # the far wall's surface is at x = 4.0, a cell boundary: its points land on either side
+    assert CellState.OCCUPIED in (at(3.95, 1.5), at(4.05, 1.5))
+    assert at(0.3, 1.5) == CellState.UNKNOWN                   # behind the camera
+    assert at(4.3, 1.5) == CellState.UNKNOWN                   # beyond the wall
+    # the wall is seen as a line of occupied cells across the view
+    j = g.world_to_cell(np.array([3.95, 0.0]))[1]
+    wall = (st[:, j] == CellState.OCCUPIED) | (st[:, j + 1] == CellState.OCCUPIED)
+    assert wall.sum() >= 15
+
+
+def test_an_uncertain_person_clears_space_but_is_not_an_obstacle():
+    person = (2.43, 1.33, 2.83, 1.73, 1.8)   # faces off the 0.1 m cell boundaries
+    depth, K, T, which = _room_frame(boxes=[person])
+    cell_person = (2.45, 1.5)
+    calm = OccupancyGrid.empty(CFG.cell_m)
+    moving = OccupancyGrid.empty(CFG.cell_m)
+    beta_calm = np.zeros_like(depth)
+    beta_moving = np.where(which == 0, 2.0, 0.05).astype(np.float32)
+    for _ in range(3):
+        calm = update_occupancy(calm, CFG, depth, K, T, beta_calm)
+        moving = update_occupancy(moving, CFG, depth, K, T, beta_moving)
+    ij = tuple(calm.world_to_cell(np.array(cell_person)))
+    assert calm.states(CFG)[ij] == CellState.OCCUPIED
+    assert moving.states(CFG)[tuple(moving.world_to_cell(np.array(cell_person)))] != CellState.OCCUPIED
+    assert not (moving.occupied(CFG) & ~calm.occupied(CFG)).any()     # uncertain returns never add obstacles
+    # a person seen earlier as an obstacle is cleared once the space is seen free
+    g = calm
+    empty_depth, _, _, _ = _room_frame()
+    for _ in range(8):
+        g = update_occupancy(g, CFG, empty_depth, K, T, beta_calm)
+    assert g.states(CFG)[tuple(g.world_to_cell(np.array(cell_person)))] == CellState.FREE
+
+
+def test_grid_grows_without_moving_what_it_knows():
+    depth, K, T, _ = _room_frame()
+    beta = np.zeros_like(depth)
+    g = OccupancyGrid.allocate((0.5, 1.0), (1.5, 2.0), CFG.cell_m)
+    assert g.shape == (10, 10)
+    g = update_occupancy(g, CFG, depth, K, T, beta)
+    assert g.shape[1] * CFG.cell_m >= 3.5
+    wall_ij = g.world_to_cell(np.array([4.05, 1.5]))
+    before = g.logodds[tuple(wall_ij)]
+    assert g.grown_to_include(np.array([1.0, 1.0]), np.array([2.0, 2.0]), CFG.grow_chunk_m) is g
+    g2 = g.grown_to_include(np.array([-0.3, 0.5]), np.array([1.0, 1.0]), CFG.grow_chunk_m)
+    assert g2.origin_xy_m[0] == pytest.approx(-2.0) and g2.origin_ij[1] == -20     # snapped to 2 m chunks
+    assert g2.shape[1] == g.shape[1] + 20
+    assert g2.logodds[tuple(g2.world_to_cell(np.array([4.05, 1.5])))] == before
+    np.testing.assert_allclose(g2.cell_to_world(g2.world_to_cell(np.array([1.23, 2.34]))), [1.25, 2.35])
+
+
+def test_update_is_pure():
+    depth, K, T, _ = _room_frame()
+    g0 = OccupancyGrid.allocate((0, 0), (4, 3), CFG.cell_m)
+    snapshot = g0.logodds.copy()
+    update_occupancy(g0, CFG, depth, K, T, np.zeros_like(depth))
+    np.testing.assert_array_equal(g0.logodds, snapshot)
+
+
+def test_bad_config_values_raise_config_error():
+    with pytest.raises(ConfigError):
+        OccupancyConfig(band_lo_m=2.0, band_hi_m=1.0)
+    with pytest.raises(ConfigError):
+        dataclasses.replace(CFG, l_free=0.3)
+    with pytest.raises(ConfigError):
+        OccupancyConfig(pixel_stride=0)
