@@ -7,11 +7,11 @@ Pipeline (forward), each step a kernel below:
 
 1. ``_project_fwd`` (parallel over Gaussians): EWA projection (Zwicker et al. 2002,
    eq. (31)-(34)), culling, conics, screen boxes.
-2. ``_bin_tiles`` (serial, O(N + pairs)): one entry per (Gaussian, overlapped tile) pair,
-   entries numbered in Gaussian order; a stable counting sort groups them by tile.
-3. ``_sort_tiles`` (parallel over tiles): stable depth sort inside each tile, so ties keep
-   Gaussian order (as gsplat's radix sort of (tile | depth) keys does).
-4. ``_raster_fwd`` (parallel over tiles): front-to-back compositing. Within a tile the
+2. ``_bin_tiles`` (serial, O(N log N + pairs)): one entry per (Gaussian, overlapped tile)
+   pair, entries numbered in Gaussian order; one stable argsort of the depths, then a
+   counting sort by tile visiting Gaussians front to back, gives every tile its list in
+   depth order with ties in index order (as gsplat's radix sort of (tile | depth) keys).
+3. ``_raster_fwd`` (parallel over tiles): front-to-back compositing. Within a tile the
    Gaussians are visited in depth order and each updates only the pixels of its screen box,
    which is the same per-pixel sequence as a pixel-major loop but skips far pixels.
 
@@ -21,6 +21,9 @@ gradient of each (Gaussian, tile) entry in that entry's own row; ``_reduce_entri
 rows of each Gaussian in entry order, and ``_project_bwd`` applies the chain rule of step 1.
 No two threads ever add into the same memory, so results are bitwise deterministic and
 independent of the number of threads.
+
+The kernels compile once (``cache=True`` keeps the machine code under ``__pycache__``), so
+only the first render in a fresh environment pays a few seconds of compilation.
 
 For pixel p and its contributing Gaussians i = 1..M (front to back), with
 w_i = alpha_i T_i, T_i = prod_{j<i} (1 - alpha_j), T = T_{M+1}:
@@ -34,7 +37,9 @@ w_i = alpha_i T_i, T_i = prod_{j<i} (1 - alpha_j), T = T_{M+1}:
 from __future__ import annotations
 
 import math
+import os
 
+import numba
 import numpy as np
 import torch
 from numba import njit, prange
@@ -42,8 +47,17 @@ from numba import njit, prange
 from dynactivegs.splat._common import (
     ALPHA_MAX, ALPHA_MIN, EPS2D, EXTEND_MAX, FAR_PLANE, FOV_CLAMP, T_MIN, TILE,
 )
+from dynactivegs.splat.gaussians import SH_C0
 
-N_GRAD = 10  # per-entry gradient row: mean2d x, y; conic a, b, c; opacity; colour r, g, b; depth
+# numba's OpenMP layer shares the machine with torch's OpenMP workers, which busy-wait after
+# every torch op; on a 2-core machine that made a 20k-Gaussian render ~3x slower (and a tiny
+# one ~20x). The workqueue layer has no such interaction. It is chosen only when the user has
+# not picked a layer; it must not be entered from several Python threads at once.
+if numba.config.THREADING_LAYER == "default" and "NUMBA_THREADING_LAYER" not in os.environ:
+    numba.config.THREADING_LAYER = "workqueue"
+
+N_GRAD = 10
+SPAN_MARGIN = 1e-4  # px added on both sides of each row span  # per-entry gradient row: mean2d x, y; conic a, b, c; opacity; colour r, g, b; depth
 
 
 # --------------------------------------------------------------------------- 3x3 helpers
@@ -256,11 +270,13 @@ def _project_bwd(means, quats, scales, vm, fx, fy, cx, cy, width, height, radii,
 
 # --------------------------------------------------------------------------- binning
 @njit(cache=True)
-def _bin_tiles(means2d, radii, tiles_x, tiles_y):
-    """Entries (Gaussian, tile) in Gaussian order, then grouped by tile (stable).
+def _bin_tiles(means2d, radii, depths, tiles_x, tiles_y):
+    """Entries (Gaussian, tile), numbered in Gaussian order, and each tile's list in depth order.
 
-    Returns g_off (N+1,) entry range of each Gaussian, entry_gid (E,), tile_off (tiles+1,),
-    tile_entries (E,) entry ids grouped by tile, in Gaussian order within a tile.
+    Returns g_off (N+1,) the entry range of each Gaussian, entry_gid (E,), tile_off (tiles+1,)
+    and tile_entries (E,): the entry ids of tile t are tile_entries[tile_off[t]:tile_off[t+1]],
+    front to back. The lists are filled by visiting Gaussians in a stable depth order, so ties
+    keep index order, as gsplat's radix sort of (tile | depth) keys does.
     """
     n = means2d.shape[0]
     g_off = np.zeros(n + 1, dtype=np.int64)
@@ -268,8 +284,10 @@ def _bin_tiles(means2d, radii, tiles_x, tiles_y):
     x1s = np.zeros(n, dtype=np.int64)
     y0s = np.zeros(n, dtype=np.int64)
     y1s = np.zeros(n, dtype=np.int64)
+    keys = np.empty(n)
     for g in range(n):
         cnt = 0
+        keys[g] = np.inf
         if radii[g, 0] > 0 or radii[g, 1] > 0:
             mx = means2d[g, 0] / TILE
             my = means2d[g, 1] / TILE
@@ -280,6 +298,7 @@ def _bin_tiles(means2d, radii, tiles_x, tiles_y):
             y0s[g] = int(min(max(0.0, math.floor(my - ry)), tiles_y))
             y1s[g] = int(min(max(0.0, math.ceil(my + ry)), tiles_y))
             cnt = (x1s[g] - x0s[g]) * (y1s[g] - y0s[g])
+            keys[g] = depths[g]
         g_off[g + 1] = g_off[g] + cnt
     n_entries = g_off[n]
     n_tiles = tiles_x * tiles_y
@@ -299,41 +318,57 @@ def _bin_tiles(means2d, radii, tiles_x, tiles_y):
         tile_off[t + 1] += tile_off[t]
     fill = tile_off[:-1].copy()
     tile_entries = np.empty(n_entries, dtype=np.int64)
-    for e in range(n_entries):
-        t = entry_tile[e]
-        tile_entries[fill[t]] = e
-        fill[t] += 1
+    order = np.argsort(keys, kind="mergesort")
+    for g in order:
+        for e in range(g_off[g], g_off[g + 1]):
+            t = entry_tile[e]
+            tile_entries[fill[t]] = e
+            fill[t] += 1
     return g_off, entry_gid, tile_off, tile_entries
 
 
-@njit(cache=True, parallel=True)
-def _sort_tiles(tile_off, tile_entries, entry_gid, depths):
-    """Stable sort of each tile's entries by camera z (in place)."""
-    n_tiles = tile_off.shape[0] - 1
-    for t in prange(n_tiles):
-        s, e = tile_off[t], tile_off[t + 1]
-        if e - s > 1:
-            ids = tile_entries[s:e].copy()
-            keys = np.empty(e - s, dtype=np.float64)
-            for i in range(e - s):
-                keys[i] = depths[entry_gid[ids[i]]]
-            order = np.argsort(keys, kind="mergesort")
-            for i in range(e - s):
-                tile_entries[s + i] = ids[order[i]]
+@njit(cache=True)
+def _rows(my, ry, y0, ph):
+    """Rows of a tile that the screen box [my - ry, my + ry] may reach (1 px margin)."""
+    v0 = int(max(float(y0), math.floor(my - ry) - 1.0))
+    v1 = int(min(float(y0 + ph - 1), math.ceil(my + ry) + 1.0))
+    return v0, v1
 
 
 @njit(cache=True)
-def _box(mx, my, rx, ry, x0, y0, pw, ph):
-    """Pixels of a tile whose centres may lie in a screen box (1 px margin for rounding)."""
-    u0 = int(max(float(x0), math.floor(mx - rx) - 1.0))
-    u1 = int(min(float(x0 + pw - 1), math.ceil(mx + rx) + 1.0))
-    v0 = int(max(float(y0), math.floor(my - ry) - 1.0))
-    v1 = int(min(float(y0 + ph - 1), math.ceil(my + ry) + 1.0))
-    return u0, u1, v0, v1
+def _row_span(mx, dy, A, B, C, level, x0, pw):
+    """Columns [u0, u1] of a tile row whose pixel centres may have sigma <= level.
+
+    sigma(dx) = 0.5 A dx^2 + B dy dx + 0.5 C dy^2 with dx = mx - (u + 0.5) is a parabola in
+    dx; its sub-level set is an interval. It is widened by SPAN_MARGIN px (and a near-zero
+    discriminant is treated as zero) so that rounding never drops a pixel the exact test
+    would keep; pixels inside are still tested exactly. Empty when u0 > u1.
+    """
+    bdy = B * dy
+    disc = bdy * bdy - A * (C * dy * dy - 2.0 * level)
+    if disc < 0.0:
+        if disc < -1e-9 * (bdy * bdy + A * C * dy * dy + 2.0 * A * level + 1.0):
+            return 1, 0
+        disc = 0.0
+    root = math.sqrt(disc)
+    dx_lo = (-bdy - root) / A
+    dx_hi = (-bdy + root) / A
+    lo = max(float(x0), math.ceil(mx - dx_hi - 0.5 - SPAN_MARGIN))
+    hi = min(float(x0 + pw - 1), math.floor(mx - dx_lo - 0.5 + SPAN_MARGIN))
+    if lo > hi:
+        return 1, 0
+    return int(lo), int(hi)
+
+
+@njit(cache=True)
+def _alpha_level(o):
+    """sigma above which o exp(-sigma) < ALPHA_MIN for sure: ln(o / ALPHA_MIN), padded for rounding."""
+    level = math.log(max(o / ALPHA_MIN, 1.0))
+    return level * (1.0 + 1e-9) + 1e-9
 
 
 # --------------------------------------------------------------------------- rasterization
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=True)
 def _raster_fwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors, depths, radii,
                 bg, width, height, tiles_x,
                 out_rgb, out_depth, out_T, out_last, entry_count, entry_weight):
@@ -358,12 +393,25 @@ def _raster_fwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors
             A, B, C = conics[g, 0], conics[g, 1], conics[g, 2]
             o = opac[g]
             cr, cg, cb, z = colors[g, 0], colors[g, 1], colors[g, 2], depths[g]
-            u0, u1, v0, v1 = _box(mx, my, float(radii[g, 0]), float(radii[g, 1]), x0, y0, pw, ph)
+            v0, v1 = _rows(my, float(radii[g, 1]), y0, ph)
+            level = _alpha_level(o)
+            step = math.exp(-A)
             cnt = 0
             wsum = 0.0
             for v in range(v0, v1 + 1):
                 dy = my - (v + 0.5)
+                u0, u1 = _row_span(mx, dy, A, B, C, level, x0, pw)
+                if u0 > u1:
+                    continue
+                # o exp(-sigma) along the row by recurrence: moving one pixel right multiplies it by
+                # ratio = exp(A dx - A / 2 + B dy), and ratio itself by exp(-A)
+                dx = mx - (u0 + 0.5)
+                gauss = o * math.exp(-(0.5 * (A * dx * dx + C * dy * dy) + B * dx * dy))
+                ratio = math.exp(A * dx - 0.5 * A + B * dy)
                 for u in range(u0, u1 + 1):
+                    g_u = gauss
+                    gauss *= ratio
+                    ratio *= step
                     i = v - y0
                     j = u - x0
                     if done[i, j]:
@@ -372,7 +420,7 @@ def _raster_fwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors
                     sigma = 0.5 * (A * dx * dx + C * dy * dy) + B * dx * dy
                     if sigma < 0.0:
                         continue
-                    alpha = min(ALPHA_MAX, o * math.exp(-sigma))
+                    alpha = min(ALPHA_MAX, g_u)
                     if alpha < ALPHA_MIN:
                         continue
                     Tc = T[i, j]
@@ -403,23 +451,43 @@ def _raster_fwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors
                 out_last[y0 + i, x0 + j] = last[i, j]
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath=True)
 def _raster_bwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors, depths, radii,
                 bg, width, height, tiles_x, T_final, last, v_rgb, v_depth, v_alpha, entry_grad):
-    """Back-to-front pass per tile; writes each entry's gradient row (see N_GRAD)."""
+    """Back-to-front pass per tile; writes each entry's gradient row (see N_GRAD).
+
+    Per pixel it keeps T_i (recovered by division), the upstream gradients, and
+    behind = sum_{j>i} w_j (c_j . v_rgb + z_j v_depth), so that (module docstring)
+    dL/dalpha_i = T_i (c_i . v_rgb + z_i v_depth) - (behind + T (bg . v_rgb) - T v_alpha) / (1 - alpha_i).
+    """
     n_tiles = tile_off.shape[0] - 1
     for t in prange(n_tiles):
         x0 = (t % tiles_x) * TILE
         y0 = (t // tiles_x) * TILE
         pw = min(TILE, width - x0)
         ph = min(TILE, height - y0)
-        Tcur = np.empty((ph, pw))
-        behind = np.zeros((ph, pw, 4))   # sum_{j>i} w_j (c_j, z_j)
+        npx = ph * pw
+        Tcur = np.empty(npx)
+        behind = np.zeros(npx)
+        const = np.empty(npx)        # T (bg . v_rgb) - T v_alpha
+        up = np.empty((npx, 4))      # v_rgb, v_depth
+        lastk = np.empty(npx, dtype=np.int64)
         k_max = -1
         for i in range(ph):
             for j in range(pw):
-                Tcur[i, j] = T_final[y0 + i, x0 + j]
-                k_max = max(k_max, last[y0 + i, x0 + j])
+                p = i * pw + j
+                Tf = T_final[y0 + i, x0 + j]
+                Tcur[p] = Tf
+                vr = v_rgb[y0 + i, x0 + j, 0]
+                vg = v_rgb[y0 + i, x0 + j, 1]
+                vb = v_rgb[y0 + i, x0 + j, 2]
+                up[p, 0] = vr
+                up[p, 1] = vg
+                up[p, 2] = vb
+                up[p, 3] = v_depth[y0 + i, x0 + j]
+                const[p] = Tf * (bg[0] * vr + bg[1] * vg + bg[2] * vb) - Tf * v_alpha[y0 + i, x0 + j]
+                lastk[p] = last[y0 + i, x0 + j]
+                k_max = max(k_max, lastk[p])
         for k in range(k_max, tile_off[t] - 1, -1):
             e = tile_entries[k]
             g = entry_gid[e]
@@ -427,7 +495,9 @@ def _raster_bwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors
             A, B, C = conics[g, 0], conics[g, 1], conics[g, 2]
             o = opac[g]
             cr, cg, cb, z = colors[g, 0], colors[g, 1], colors[g, 2], depths[g]
-            u0, u1, v0, v1 = _box(mx, my, float(radii[g, 0]), float(radii[g, 1]), x0, y0, pw, ph)
+            v0, v1 = _rows(my, float(radii[g, 1]), y0, ph)
+            level = _alpha_level(o)
+            step = math.exp(-A)
             gx = 0.0
             gy = 0.0
             gA = 0.0
@@ -440,40 +510,43 @@ def _raster_bwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors
             gz = 0.0
             for v in range(v0, v1 + 1):
                 dy = my - (v + 0.5)
+                u0, u1 = _row_span(mx, dy, A, B, C, level, x0, pw)
+                if u0 > u1:
+                    continue
+                dx = mx - (u0 + 0.5)
+                gauss = math.exp(-(0.5 * (A * dx * dx + C * dy * dy) + B * dx * dy))
+                ratio = math.exp(A * dx - 0.5 * A + B * dy)
+                row = (v - y0) * pw - x0
                 for u in range(u0, u1 + 1):
-                    if k > last[v, u]:
+                    ex = gauss
+                    gauss *= ratio
+                    ratio *= step
+                    p = row + u
+                    if k > lastk[p]:
                         continue
                     dx = mx - (u + 0.5)
                     sigma = 0.5 * (A * dx * dx + C * dy * dy) + B * dx * dy
                     if sigma < 0.0:
                         continue
-                    ex = math.exp(-sigma)
                     raw = o * ex
                     alpha = min(ALPHA_MAX, raw)
                     if alpha < ALPHA_MIN:
                         continue
-                    i = v - y0
-                    j = u - x0
                     ra = 1.0 / (1.0 - alpha)
-                    Ti = Tcur[i, j] * ra
-                    Tcur[i, j] = Ti
-                    Tf = T_final[v, u]
+                    Ti = Tcur[p] * ra
+                    Tcur[p] = Ti
                     wgt = alpha * Ti
-                    vr, vg, vb = v_rgb[v, u, 0], v_rgb[v, u, 1], v_rgb[v, u, 2]
-                    vd = v_depth[v, u]
+                    vr = up[p, 0]
+                    vg = up[p, 1]
+                    vb = up[p, 2]
+                    vd = up[p, 3]
                     gr += wgt * vr
                     gg += wgt * vg
                     gb += wgt * vb
                     gz += wgt * vd
-                    v_a = ((cr * Ti - (behind[i, j, 0] + Tf * bg[0]) * ra) * vr
-                           + (cg * Ti - (behind[i, j, 1] + Tf * bg[1]) * ra) * vg
-                           + (cb * Ti - (behind[i, j, 2] + Tf * bg[2]) * ra) * vb
-                           + (z * Ti - behind[i, j, 3] * ra) * vd
-                           + Tf * ra * v_alpha[v, u])
-                    behind[i, j, 0] += wgt * cr
-                    behind[i, j, 1] += wgt * cg
-                    behind[i, j, 2] += wgt * cb
-                    behind[i, j, 3] += wgt * z
+                    cv = cr * vr + cg * vg + cb * vb + z * vd
+                    v_a = Ti * cv - ra * (behind[p] + const[p])
+                    behind[p] += wgt * cv
                     if raw <= ALPHA_MAX:   # alpha = o exp(-sigma), not clamped
                         go += ex * v_a
                         v_s = -alpha * v_a
@@ -508,18 +581,41 @@ def _reduce_entries(g_off, entry_vals, out):
 
 
 # --------------------------------------------------------------------------- torch glue
+# The glue uses NumPy only (no torch kernels): torch's OpenMP workers busy-wait after each op
+# and, on a machine with few cores, steal the CPU from the numba threads that run next.
+
 def _np64(t: torch.Tensor) -> np.ndarray:
-    return np.ascontiguousarray(t.detach().to(torch.float64).cpu().numpy())
+    """float64, C-contiguous NumPy copy (or view) of a CPU tensor."""
+    return np.ascontiguousarray(t.detach().cpu().numpy(), dtype=np.float64)
 
 
-class _Rasterize(torch.autograd.Function):
-    """Differentiable in means, quats (unit), scales, opacities, colors and background."""
+def _to_torch(a: np.ndarray, dtype: torch.dtype) -> torch.Tensor:
+    np_dtype = np.float32 if dtype == torch.float32 else np.float64
+    return torch.from_numpy(np.ascontiguousarray(a, dtype=np_dtype))
+
+
+class _Render(torch.autograd.Function):
+    """Raw Gaussian parameters -> (rgb, expected depth, alpha, radii, n_touched, weight_sum).
+
+    Activations are applied here (see :mod:`dynactivegs.splat.gaussians`): scales = exp,
+    opacity = sigmoid, unit quaternions, rgb = max(C0 sh0 + 0.5, 0); and the expected depth is
+    D / max(alpha, 1e-10) as gsplat's "RGB+ED". Differentiable in the five raw parameter
+    tensors and the background.
+    """
 
     @staticmethod
-    def forward(ctx, means, quats, scales, opacities, colors, background, viewmat, K, width, height, near_plane):
+    def forward(ctx, means, log_scales, quats, opacity_logits, sh0, background, viewmat, K, width, height,
+                near_plane):
         dt = means.dtype
         n = means.shape[0]
-        m64, q64, s64, o64, c64, bg64 = (_np64(x) for x in (means, quats, scales, opacities, colors, background))
+        m64, ls64, qr64, ol64, sh64, bg64 = (_np64(x) for x in (means, log_scales, quats, opacity_logits, sh0,
+                                                                 background))
+        s64 = np.exp(ls64)
+        o64 = 1.0 / (1.0 + np.exp(-ol64))
+        qnorm = np.sqrt((qr64 * qr64).sum(axis=1, keepdims=True))
+        q64 = qr64 / qnorm
+        c_lin = SH_C0 * sh64 + 0.5
+        c64 = np.maximum(c_lin, 0.0)
         vm = np.ascontiguousarray(viewmat, dtype=np.float64)
         fx, fy, cx, cy = float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2])
         means2d = np.zeros((n, 2))
@@ -529,47 +625,51 @@ class _Rasterize(torch.autograd.Function):
         _project_fwd(m64, q64, s64, o64, vm, fx, fy, cx, cy, width, height, near_plane,
                      means2d, conics, depths, radii)
         tiles_x, tiles_y = math.ceil(width / TILE), math.ceil(height / TILE)
-        g_off, entry_gid, tile_off, tile_entries = _bin_tiles(means2d, radii, tiles_x, tiles_y)
-        _sort_tiles(tile_off, tile_entries, entry_gid, depths)
+        g_off, entry_gid, tile_off, tile_entries = _bin_tiles(means2d, radii, depths, tiles_x, tiles_y)
         n_entries = entry_gid.shape[0]
         rgb = np.empty((height, width, 3))
-        depth = np.empty((height, width))
+        depth_acc = np.empty((height, width))
         T_final = np.empty((height, width))
         last = np.empty((height, width), dtype=np.int64)
-        entry_stats = np.zeros((n_entries, 2))
         entry_count = np.zeros(n_entries, dtype=np.int64)
         entry_weight = np.zeros(n_entries)
         _raster_fwd(tile_off, tile_entries, entry_gid, means2d, conics, o64, c64, depths, radii,
-                    bg64, width, height, tiles_x, rgb, depth, T_final, last, entry_count, entry_weight)
+                    bg64, width, height, tiles_x, rgb, depth_acc, T_final, last, entry_count, entry_weight)
+        entry_stats = np.empty((n_entries, 2))
         entry_stats[:, 0] = entry_count
         entry_stats[:, 1] = entry_weight
         stats = np.zeros((n, 2))
         _reduce_entries(g_off, entry_stats, stats)
+        alpha = 1.0 - T_final
+        alpha_c = np.maximum(alpha, 1e-10)
+        depth = depth_acc / alpha_c
 
-        ctx.saved = (m64, q64, s64, o64, c64, bg64, vm, (fx, fy, cx, cy), width, height, means2d, conics,
-                     depths, radii, g_off, entry_gid, tile_off, tile_entries, T_final, last, tiles_x)
-        out_rgb = torch.from_numpy(rgb).to(dt)
-        out_depth = torch.from_numpy(depth).to(dt)
-        out_alpha = torch.from_numpy(1.0 - T_final).to(dt)
+        ctx.saved = (m64, s64, qr64, qnorm, q64, o64, c_lin, c64, bg64, vm, (fx, fy, cx, cy), width, height,
+                     means2d, conics, depths, radii, g_off, entry_gid, tile_off, tile_entries, T_final, last,
+                     tiles_x, depth_acc, alpha, alpha_c)
+        ctx.dtype = dt
         out_radii = torch.from_numpy(radii)
         n_touched = torch.from_numpy(stats[:, 0].astype(np.int32))
-        weight_sum = torch.from_numpy(stats[:, 1]).to(dt)
+        weight_sum = _to_torch(stats[:, 1], dt)
         ctx.mark_non_differentiable(out_radii, n_touched, weight_sum)
-        ctx.dtype = dt
-        return out_rgb, out_depth, out_alpha, out_radii, n_touched, weight_sum
+        return (_to_torch(rgb, dt), _to_torch(depth, dt), _to_torch(alpha, dt), out_radii, n_touched, weight_sum)
 
     @staticmethod
     def backward(ctx, v_rgb, v_depth, v_alpha, _v_radii, _v_touched, _v_wsum):
-        (m64, q64, s64, o64, c64, bg64, vm, (fx, fy, cx, cy), width, height, means2d, conics,
-         depths, radii, g_off, entry_gid, tile_off, tile_entries, T_final, last, tiles_x) = ctx.saved
+        (m64, s64, qr64, qnorm, q64, o64, c_lin, c64, bg64, vm, (fx, fy, cx, cy), width, height,
+         means2d, conics, depths, radii, g_off, entry_gid, tile_off, tile_entries, T_final, last,
+         tiles_x, depth_acc, alpha, alpha_c) = ctx.saved
         dt = ctx.dtype
         n = m64.shape[0]
         v_rgb64 = _np64(v_rgb) if v_rgb is not None else np.zeros((height, width, 3))
-        v_depth64 = _np64(v_depth) if v_depth is not None else np.zeros((height, width))
+        v_ed = _np64(v_depth) if v_depth is not None else np.zeros((height, width))
         v_alpha64 = _np64(v_alpha) if v_alpha is not None else np.zeros((height, width))
+        # expected depth = D / max(alpha, 1e-10)
+        v_dacc = v_ed / alpha_c
+        v_alpha64 = v_alpha64 - np.where(alpha >= 1e-10, v_ed * depth_acc / (alpha_c * alpha_c), 0.0)
         entry_grad = np.zeros((entry_gid.shape[0], N_GRAD))
         _raster_bwd(tile_off, tile_entries, entry_gid, means2d, conics, o64, c64, depths, radii,
-                    bg64, width, height, tiles_x, T_final, last, v_rgb64, v_depth64, v_alpha64, entry_grad)
+                    bg64, width, height, tiles_x, T_final, last, v_rgb64, v_dacc, v_alpha64, entry_grad)
         grad = np.zeros((n, N_GRAD))
         _reduce_entries(g_off, entry_grad, grad)
         v_means = np.empty((n, 3))
@@ -578,19 +678,28 @@ class _Rasterize(torch.autograd.Function):
         _project_bwd(m64, q64, s64, vm, fx, fy, cx, cy, width, height, radii, conics,
                      np.ascontiguousarray(grad[:, 0:2]), np.ascontiguousarray(grad[:, 2:5]),
                      np.ascontiguousarray(grad[:, 9]), v_means, v_quats, v_scales)
+        # activations
+        v_log_scales = v_scales * s64
+        v_logits = grad[:, 5] * o64 * (1.0 - o64)
+        v_qraw = (v_quats - q64 * (v_quats * q64).sum(axis=1, keepdims=True)) / qnorm
+        v_sh0 = np.where(c_lin >= 0.0, SH_C0 * grad[:, 6:9], 0.0)
         v_bg = (T_final[:, :, None] * v_rgb64).sum(axis=(0, 1))
-        t = lambda a: torch.from_numpy(np.ascontiguousarray(a)).to(dt)  # noqa: E731
-        return (t(v_means), t(v_quats), t(v_scales), t(grad[:, 5]), t(grad[:, 6:9]), t(v_bg),
+        return (_to_torch(v_means, dt), _to_torch(v_log_scales, dt), _to_torch(v_qraw, dt),
+                _to_torch(v_logits, dt), _to_torch(v_sh0, dt), _to_torch(v_bg, dt),
                 None, None, None, None, None)
 
 
-def rasterize(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor, opacities: torch.Tensor,
-              colors: torch.Tensor, background: torch.Tensor, viewmat: np.ndarray, K: np.ndarray,
-              width: int, height: int, near_plane: float
-              ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Same contract as :func:`dynactivegs.splat._reference.rasterize` (shapes, units, outputs)."""
+def render_raw(means: torch.Tensor, log_scales: torch.Tensor, quats: torch.Tensor, opacity_logits: torch.Tensor,
+               sh0: torch.Tensor, background: torch.Tensor, viewmat: np.ndarray, K: np.ndarray,
+               width: int, height: int, near_plane: float
+               ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Render raw Gaussian parameters (the fields of :class:`~dynactivegs.splat.gaussians.Gaussians`).
+
+    Returns rgb (H, W, 3), expected depth (H, W) in m, alpha (H, W), radii (N, 2) int32,
+    n_touched (N,) int32, weight_sum (N,); float outputs in the parameters' dtype.
+    """
     n = means.shape[0]
-    assert means.shape == (n, 3) and quats.shape == (n, 4) and scales.shape == (n, 3)
-    assert opacities.shape == (n,) and colors.shape == (n, 3) and background.shape == (3,)
-    return _Rasterize.apply(means, quats, scales, opacities, colors, background, viewmat, K,
-                            int(width), int(height), float(near_plane))
+    assert means.shape == (n, 3) and log_scales.shape == (n, 3) and quats.shape == (n, 4)
+    assert opacity_logits.shape == (n,) and sh0.shape == (n, 3) and background.shape == (3,)
+    return _Render.apply(means, log_scales, quats, opacity_logits, sh0, background, viewmat, K,
+                         int(width), int(height), float(near_plane))

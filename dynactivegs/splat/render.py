@@ -118,12 +118,17 @@ def render(
             gaussians, bg, viewmat, K64, width, height, near_plane)
         return RenderOut(rgb, depth, alpha, radii, n_touched, weight_sum, which)
 
-    if which == "cpu":
-        from dynactivegs.splat._cpu import rasterize
-    else:
-        from dynactivegs.splat._reference import rasterize
     if dev.type != "cpu":
         raise DagsError(f"render backend {which!r} needs the Gaussians on the CPU; they are on {dev}")
+    if which == "cpu":
+        from dynactivegs.splat._cpu import render_raw
+
+        rgb, depth, alpha, radii, n_touched, weight_sum = render_raw(
+            *gaussians.tensors(), bg, viewmat, K64, width, height, near_plane)
+        return RenderOut(rgb, depth, alpha, radii, n_touched, weight_sum, which)
+
+    from dynactivegs.splat._reference import rasterize
+
     rgb, depth_acc, alpha, radii, n_touched, weight_sum = rasterize(
         gaussians.means, gaussians.unit_quats, gaussians.scales, gaussians.opacities, gaussians.rgb,
         bg, viewmat, K64, width, height, near_plane)
