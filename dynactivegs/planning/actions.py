@@ -1,0 +1,161 @@
+"""From a path to the robot's next discrete action; local collision check; stuck detection.
+
+- :func:`next_action`: turn toward the next waypoint, go forward when aligned within half a
+  turn step, at the end turn to the target yaw, then STOP (DESIGN.md §5 Planning: "the path
+  turned into the next discrete action").
+- :func:`forward_blocked`: whether the next forward move would run into something seen in
+  the current depth frame (people included, whatever their uncertainty): points in the body's
+  height band inside the rectangle the robot's disc sweeps in one step.
+- :class:`StuckState` / :func:`update_stuck`: the robot has not left a small disc for k steps
+  (blocked by a person in a doorway, turning back and forth), so the caller should pick
+  another target.
+
+Actions are :class:`dynactivegs.sim.robot.Action`; yaw is counter-clockwise from +x, radians.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from dynactivegs.config import RobotConfig
+from dynactivegs.errors import ConfigError
+from dynactivegs.records import RobotPose2D
+from dynactivegs.selection.occupancy import backproject
+from dynactivegs.sim.robot import Action, wrap_angle
+
+
+def _require(cond: bool, name: str, value: object, allowed: str) -> None:
+    if not cond:
+        raise ConfigError(f"bad config value {name}={value!r}: must be {allowed}")
+
+
+@dataclass(frozen=True, slots=True)
+class ActionConfig:
+    """Path following, the local collision check and the stuck rule."""
+
+    forward_step_m: float = 0.25
+    """Distance of one forward action (match RobotConfig.forward_step_m)."""
+    turn_step_deg: float = 10.0
+    """Angle of one turn action (match RobotConfig.turn_step_deg)."""
+    radius_m: float = 0.18
+    """The robot's collision radius (match RobotConfig.radius_m)."""
+    reach_tol_m: float = 0.15
+    """A waypoint within this distance counts as reached; keep it above half the forward step so a step never overshoots it back and forth."""
+    band_lo_m: float = 0.1
+    """Depth points lower than this above the floor do not block (floor)."""
+    band_hi_m: float = 1.5
+    """Depth points higher than this do not block (above the robot's body)."""
+    min_blocking_points: int = 3
+    """This many depth points in the swept rectangle block the move (fewer are treated as noise)."""
+    stuck_steps: int = 40
+    """Steps without leaving a disc of stuck_move_tol_m after which the robot is stuck (above a full turn of steps)."""
+    stuck_move_tol_m: float = 0.1
+    """Radius of the disc the robot must leave to count as moving."""
+
+    def __post_init__(self) -> None:
+        _require(0.01 <= self.forward_step_m <= 2.0, "actions.forward_step_m", self.forward_step_m, "in [0.01, 2] m")
+        _require(0.5 <= self.turn_step_deg <= 90.0, "actions.turn_step_deg", self.turn_step_deg, "in [0.5, 90] deg")
+        _require(0.0 < self.radius_m <= 1.0, "actions.radius_m", self.radius_m, "in (0, 1] m")
+        _require(0.5 * self.forward_step_m < self.reach_tol_m, "actions.reach_tol_m", self.reach_tol_m,
+                 "above half of actions.forward_step_m")
+        _require(0.0 <= self.band_lo_m < self.band_hi_m, "actions.band_lo_m", self.band_lo_m, "in [0, band_hi_m)")
+        _require(self.min_blocking_points >= 1, "actions.min_blocking_points", self.min_blocking_points, ">= 1")
+        _require(self.stuck_steps >= 1, "actions.stuck_steps", self.stuck_steps, ">= 1")
+        _require(0.0 < self.stuck_move_tol_m < self.forward_step_m, "actions.stuck_move_tol_m", self.stuck_move_tol_m,
+                 "in (0, forward_step_m)")
+
+    @staticmethod
+    def for_robot(robot: RobotConfig) -> "ActionConfig":
+        """Step sizes, radius and height band taken from the robot's config; the rest default."""
+        return ActionConfig(forward_step_m=robot.forward_step_m, turn_step_deg=robot.turn_step_deg,
+                            radius_m=robot.radius_m, reach_tol_m=max(0.15, 0.6 * robot.forward_step_m),
+                            band_hi_m=robot.body_height_m)
+
+
+@dataclass(frozen=True, slots=True)
+class PathStep:
+    """The next action and how far along the waypoints the robot is."""
+
+    action: Action
+    next_waypoint: int            # index of the first waypoint not yet reached (== len(waypoints) when all are)
+
+
+def _turn_toward(err_rad: float, half_step_rad: float) -> Action | None:
+    if abs(err_rad) <= half_step_rad + 1e-9:
+        return None
+    return Action.TURN_LEFT if err_rad > 0 else Action.TURN_RIGHT
+
+
+def next_action(pose: RobotPose2D, waypoints_xy_m: np.ndarray, target_yaw_rad: float | None,
+                cfg: ActionConfig) -> PathStep:
+    """The next discrete action to follow ``waypoints_xy_m`` (K, 2) and end facing ``target_yaw_rad``.
+
+    Waypoints up to the last one within ``reach_tol_m`` of the robot are taken as reached.
+    Then: turn toward the next waypoint until the heading error is at most half a turn step,
+    go forward; with all waypoints reached, turn to ``target_yaw_rad`` (the shorter way) and
+    STOP once within half a turn step (``None``: STOP at once).
+    """
+    wp = np.asarray(waypoints_xy_m, np.float64).reshape(-1, 2)
+    half = 0.5 * math.radians(cfg.turn_step_deg)
+    d = np.hypot(wp[:, 0] - pose.x_m, wp[:, 1] - pose.y_m)
+    within = np.nonzero(d <= cfg.reach_tol_m)[0]
+    k = int(within[-1]) + 1 if len(within) else 0
+    if k == len(wp):
+        if target_yaw_rad is None:
+            return PathStep(Action.STOP, k)
+        turn = _turn_toward(wrap_angle(target_yaw_rad - pose.yaw_rad), half)
+        return PathStep(Action.STOP if turn is None else turn, k)
+    bearing = math.atan2(wp[k, 1] - pose.y_m, wp[k, 0] - pose.x_m)
+    turn = _turn_toward(wrap_angle(bearing - pose.yaw_rad), half)
+    return PathStep(Action.FORWARD if turn is None else turn, k)
+
+
+def forward_blocked(depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, cfg: ActionConfig,
+                    stride: int = 1) -> bool:
+    """Whether one forward step would hit something seen in this depth frame.
+
+    The camera is assumed to sit above the robot's centre (its position projected to the
+    floor) looking along the robot's heading (its optical axis projected to the floor).
+    Blocking points: height in ``[band_lo_m, band_hi_m]``, ahead by ``(0, forward_step + radius]``
+    and at most ``radius`` to either side. ``depth_m`` float32 (H, W), 0 = no return.
+
+    The camera sees nothing below its lower field-of-view edge near the robot (at 1.25 m and
+    60 deg vertical FOV, only points above ~1 m are visible 0.4 m ahead), so low obstacles
+    must come from the occupancy map; this check catches walls and people.
+    """
+    pts, _ = backproject(depth_m, K, T_world_cam, stride)
+    fwd = T_world_cam[:2, 2].astype(np.float64)
+    norm = math.hypot(fwd[0], fwd[1])
+    assert norm > 1e-6, "camera looks straight up or down"
+    fwd = fwd / norm
+    left = np.array([-fwd[1], fwd[0]])
+    rel = pts[:, :2] - T_world_cam[:2, 3]
+    ahead = rel @ fwd
+    side = rel @ left
+    z = pts[:, 2]
+    hit = ((z >= cfg.band_lo_m) & (z <= cfg.band_hi_m) & (ahead > 0.0)
+           & (ahead <= cfg.forward_step_m + cfg.radius_m) & (np.abs(side) <= cfg.radius_m))
+    return int(hit.sum()) >= cfg.min_blocking_points
+
+
+@dataclass(frozen=True, slots=True)
+class StuckState:
+    """Where the robot last counted as moving, and for how many steps since it has stayed near there."""
+
+    anchor_xy_m: tuple[float, float] | None = None
+    steps_still: int = 0
+
+
+def update_stuck(state: StuckState, x_m: float, y_m: float, cfg: ActionConfig) -> StuckState:
+    """The stuck state after the robot is observed at ``(x_m, y_m)``: leaving the anchor disc resets the count."""
+    if state.anchor_xy_m is None or math.hypot(x_m - state.anchor_xy_m[0], y_m - state.anchor_xy_m[1]) > cfg.stuck_move_tol_m:
+        return StuckState((float(x_m), float(y_m)), 0)
+    return StuckState(state.anchor_xy_m, state.steps_still + 1)
+
+
+def is_stuck(state: StuckState, cfg: ActionConfig) -> bool:
+    """Whether the robot has not moved for ``stuck_steps`` steps (the caller should pick another target and reset)."""
+    return state.steps_still >= cfg.stuck_steps
