@@ -1,0 +1,1 @@
+"""Evaluation: metrics, held-out views, benchmark tables and plots."""
