@@ -57,3 +57,25 @@ def update_occupancy_reference(grid: OccupancyGrid, cfg: OccupancyConfig, depth_
     grid, rays = frame_rays(grid, cfg, depth_m, K, T_world_cam, beta)
     seen_free, seen_occ = seen_masks_reference(grid.shape, rays)
     return OccupancyGrid(grid.origin_ij, grid.cell_m, apply_seen(grid.logodds, seen_free, seen_occ, cfg))
+
+
+def dyn_distance_terms_reference(G, um_attr: str = "um_mean") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Reference of :func:`dynactivegs.selection.subregions.dyn_distance_terms`: one networkx path per pair.
+
+    With tied shortest paths the two may pick different paths; the tests use random lengths.
+    """
+    import networkx as nx
+
+    n = G.number_of_nodes()
+    d_e = np.zeros((n, n))
+    d_p = np.full((n, n), np.inf)
+    d_m = np.full((n, n), np.inf)
+    for i in range(n):
+        paths = nx.single_source_dijkstra_path(G, i, weight="length_m")
+        for j in range(n):
+            d_e[i, j] = math.dist(G.nodes[i]["xy"], G.nodes[j]["xy"])
+            if j in paths:
+                p = paths[j]
+                d_p[i, j] = sum(G.edges[a, b]["length_m"] for a, b in zip(p[:-1], p[1:]))
+                d_m[i, j] = sum(G.edges[a, b]["length_m"] * G.edges[a, b].get(um_attr, 0.0) for a, b in zip(p[:-1], p[1:]))
+    return d_e, d_p, d_m
