@@ -6,11 +6,13 @@
 For each image size (160x92, 320x184) and Gaussian count (5k, 20k, 50k, all in view) it
 times one render plus the backward pass of an L1 + depth loss, for the reference
 (``backend="reference"``) and the fast backend (``backend="cpu"``), in one run, and prints
-the median times and their ratio. The reference is timed with fewer repeats where it is
+the median wall times and their ratio, and the fast backend's CPU time per pass summed over
+its threads (``cpu CPU-ms``: on an otherwise idle machine with k cores the wall time
+approaches this divided by k; on a shared machine the wall time is what other processes
+leave). The reference is timed with fewer repeats where it is
 slow (the ``ref reps`` column says how many). Then, each in a fresh subprocess so that
 nothing else is counted, the peak resident memory of one forward+backward of 50k Gaussians
-at 320x184 (``resource.getrusage``'s ``ru_maxrss``: the whole process, Python and torch
-included). Where a CUDA device and gsplat are present, the gsplat backend is timed too.
+at 320x184 (the process's VmHWM: the whole process, Python and torch included). Where a CUDA device and gsplat are present, the gsplat backend is timed too.
 
 The scene is a depth-map-like cloud: Gaussians at random pixels and depths 1-5 m, screen
 size ~0.8 px x sqrt(pixels per Gaussian), opacity 0.3-0.95, random rotations and colours.
@@ -27,11 +29,16 @@ import subprocess
 import sys
 import time
 
-import numpy as np
-import torch
+# torch's OpenMP workers busy-wait ("active" policy) after every op, which on a 2-core machine
+# steals the cores from the numba threads that run next (and from the reference's own next op).
+# The benchmark asks for passive waiting unless the caller set a policy; the header prints it.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from dynactivegs.splat import Gaussians, render
-from dynactivegs.splat.losses import depth_l1, l1
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from dynactivegs.splat import Gaussians, render  # noqa: E402
+from dynactivegs.splat.losses import depth_l1, l1  # noqa: E402
 
 
 def scene(n: int, width: int, height: int, seed: int = 0) -> tuple[Gaussians, np.ndarray, np.ndarray, torch.Tensor]:
@@ -57,13 +64,15 @@ def fwd_bwd(g: Gaussians, K, T, width: int, height: int, target: torch.Tensor, b
     loss.backward()
 
 
-def time_it(g, K, T, width, height, target, backend: str, reps: int) -> float:
-    """Median seconds of ``reps`` forward+backward passes after one warm-up."""
+def time_it(g, K, T, width, height, target, backend: str, reps: int) -> tuple[float, float]:
+    """Median wall seconds of ``reps`` forward+backward passes after one warm-up, and the mean
+    CPU seconds per pass summed over all threads (``time.process_time``)."""
     g = g.to(device="cuda") if backend == "cuda" else g
     g.requires_grad_()
     target = target.to(g.device)
     fwd_bwd(g, K, T, width, height, target, backend)
     times = []
+    cpu0 = time.process_time()
     for _ in range(reps):
         for t in g.tensors():
             t.grad = None
@@ -74,7 +83,7 @@ def time_it(g, K, T, width, height, target, backend: str, reps: int) -> float:
         if backend == "cuda":
             torch.cuda.synchronize()
         times.append(time.perf_counter() - t0)
-    return float(np.median(times))
+    return float(np.median(times)), (time.process_time() - cpu0) / reps
 
 
 def peak_memory_subprocess(backend: str, n: int, width: int, height: int) -> float:
@@ -84,11 +93,24 @@ def peak_memory_subprocess(backend: str, n: int, width: int, height: int) -> flo
     return float(out.strip().splitlines()[-1])
 
 
+def peak_rss_mib() -> float:
+    """This process's peak resident set: VmHWM (reset at exec, unlike ru_maxrss, which a child
+    inherits from the parent it was forked from), else ru_maxrss."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return float(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0   # KiB on Linux
+
+
 def memory_probe(backend: str, n: int, width: int, height: int) -> None:
     g, K, T, target = scene(n, width, height)
     g.requires_grad_()
     fwd_bwd(g, K, T, width, height, target, backend)
-    print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0)   # KiB on Linux -> MiB
+    print(peak_rss_mib())
 
 
 def main() -> None:
@@ -109,9 +131,9 @@ def main() -> None:
     counts = (5_000, 20_000) if args.quick else (5_000, 20_000, 50_000)
     sizes = ((160, 92), (320, 184))
     print(f"# splat forward+backward, {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
-          f"torch {torch.__version__} ({torch.get_num_threads()} threads), numba {numba.__version__}; "
-          f"load average before: {os.getloadavg()[0]:.2f}")
-    header = "| image | Gaussians | reference ms | ref reps | cpu ms | cpu reps | speed-up |"
+          f"torch {torch.__version__} ({torch.get_num_threads()} threads), numba {numba.__version__}, "
+          f"OMP_WAIT_POLICY={os.environ['OMP_WAIT_POLICY']}; load average before: {os.getloadavg()[0]:.2f}")
+    header = "| image | Gaussians | reference ms | ref reps | cpu ms | cpu reps | speed-up | cpu CPU-ms |"
     if with_cuda:
         header += " gsplat ms |"
     print(header)
@@ -121,12 +143,12 @@ def main() -> None:
             g, K, T, target = scene(n, width, height)
             fast_reps = 10
             ref_reps = 3 if n * width * height <= 20_000 * 160 * 92 else 1
-            t_fast = time_it(g, K, T, width, height, target, "cpu", fast_reps)
-            t_ref = time_it(g, K, T, width, height, target, "reference", ref_reps)
+            t_fast, cpu_fast = time_it(g, K, T, width, height, target, "cpu", fast_reps)
+            t_ref, _ = time_it(g, K, T, width, height, target, "reference", ref_reps)
             row = (f"| {width}x{height} | {n:,} | {t_ref * 1e3:.0f} | {ref_reps} | {t_fast * 1e3:.1f} | {fast_reps} "
-                   f"| {t_ref / t_fast:.1f}x |")
+                   f"| {t_ref / t_fast:.1f}x | {cpu_fast * 1e3:.1f} |")
             if with_cuda:
-                row += f" {time_it(g, K, T, width, height, target, 'cuda', 20) * 1e3:.2f} |"
+                row += f" {time_it(g, K, T, width, height, target, 'cuda', 20)[0] * 1e3:.2f} |"
             print(row, flush=True)
     print(f"# numba threading layer: {numba.threading_layer()}, {numba.get_num_threads()} threads; "
           f"load average after: {os.getloadavg()[0]:.2f}")

@@ -360,17 +360,10 @@ def _row_span(mx, dy, A, B, C, level, x0, pw):
     return int(lo), int(hi)
 
 
-@njit(cache=True)
-def _alpha_level(o):
-    """sigma above which o exp(-sigma) < ALPHA_MIN for sure: ln(o / ALPHA_MIN), padded for rounding."""
-    level = math.log(max(o / ALPHA_MIN, 1.0))
-    return level * (1.0 + 1e-9) + 1e-9
-
-
 # --------------------------------------------------------------------------- rasterization
 @njit(cache=True, parallel=True, fastmath=True)
 def _raster_fwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors, depths, radii,
-                bg, width, height, tiles_x,
+                levels, steps, bg, width, height, tiles_x,
                 out_rgb, out_depth, out_T, out_last, entry_count, entry_weight):
     """Front-to-back compositing per tile; also each pixel's final T and last contributor."""
     n_tiles = tile_off.shape[0] - 1
@@ -383,6 +376,7 @@ def _raster_fwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors
         acc = np.zeros((ph, pw, 4))
         last = np.full((ph, pw), -1, dtype=np.int64)
         done = np.zeros((ph, pw), dtype=np.bool_)
+        row_done = np.zeros(ph, dtype=np.int64)
         n_done = 0
         for k in range(tile_off[t], tile_off[t + 1]):
             if n_done == pw * ph:
@@ -394,11 +388,13 @@ def _raster_fwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors
             o = opac[g]
             cr, cg, cb, z = colors[g, 0], colors[g, 1], colors[g, 2], depths[g]
             v0, v1 = _rows(my, float(radii[g, 1]), y0, ph)
-            level = _alpha_level(o)
-            step = math.exp(-A)
+            level = levels[g]
+            step = steps[g]
             cnt = 0
             wsum = 0.0
             for v in range(v0, v1 + 1):
+                if row_done[v - y0] == pw:
+                    continue
                 dy = my - (v + 0.5)
                 u0, u1 = _row_span(mx, dy, A, B, C, level, x0, pw)
                 if u0 > u1:
@@ -428,6 +424,7 @@ def _raster_fwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors
                     if next_T <= T_MIN:
                         done[i, j] = True
                         n_done += 1
+                        row_done[i] += 1
                         continue
                     wgt = alpha * Tc
                     acc[i, j, 0] += wgt * cr
@@ -453,7 +450,7 @@ def _raster_fwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors
 
 @njit(cache=True, parallel=True, fastmath=True)
 def _raster_bwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors, depths, radii,
-                bg, width, height, tiles_x, T_final, last, v_rgb, v_depth, v_alpha, entry_grad):
+                levels, steps, bg, width, height, tiles_x, T_final, last, v_rgb, v_depth, v_alpha, entry_grad):
     """Back-to-front pass per tile; writes each entry's gradient row (see N_GRAD).
 
     Per pixel it keeps T_i (recovered by division), the upstream gradients, and
@@ -472,6 +469,7 @@ def _raster_bwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors
         const = np.empty(npx)        # T (bg . v_rgb) - T v_alpha
         up = np.empty((npx, 4))      # v_rgb, v_depth
         lastk = np.empty(npx, dtype=np.int64)
+        row_last = np.full(ph, -1, dtype=np.int64)
         k_max = -1
         for i in range(ph):
             for j in range(pw):
@@ -487,6 +485,7 @@ def _raster_bwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors
                 up[p, 3] = v_depth[y0 + i, x0 + j]
                 const[p] = Tf * (bg[0] * vr + bg[1] * vg + bg[2] * vb) - Tf * v_alpha[y0 + i, x0 + j]
                 lastk[p] = last[y0 + i, x0 + j]
+                row_last[i] = max(row_last[i], lastk[p])
                 k_max = max(k_max, lastk[p])
         for k in range(k_max, tile_off[t] - 1, -1):
             e = tile_entries[k]
@@ -496,8 +495,8 @@ def _raster_bwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors
             o = opac[g]
             cr, cg, cb, z = colors[g, 0], colors[g, 1], colors[g, 2], depths[g]
             v0, v1 = _rows(my, float(radii[g, 1]), y0, ph)
-            level = _alpha_level(o)
-            step = math.exp(-A)
+            level = levels[g]
+            step = steps[g]
             gx = 0.0
             gy = 0.0
             gA = 0.0
@@ -509,6 +508,8 @@ def _raster_bwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors
             gb = 0.0
             gz = 0.0
             for v in range(v0, v1 + 1):
+                if k > row_last[v - y0]:
+                    continue
                 dy = my - (v + 0.5)
                 u0, u1 = _row_span(mx, dy, A, B, C, level, x0, pw)
                 if u0 > u1:
@@ -633,8 +634,11 @@ class _Render(torch.autograd.Function):
         last = np.empty((height, width), dtype=np.int64)
         entry_count = np.zeros(n_entries, dtype=np.int64)
         entry_weight = np.zeros(n_entries)
+        # sigma above which o exp(-sigma) < ALPHA_MIN for sure: ln(o / ALPHA_MIN), padded for rounding
+        levels = np.log(np.maximum(o64 / ALPHA_MIN, 1.0)) * (1.0 + 1e-9) + 1e-9
+        steps = np.exp(-conics[:, 0])
         _raster_fwd(tile_off, tile_entries, entry_gid, means2d, conics, o64, c64, depths, radii,
-                    bg64, width, height, tiles_x, rgb, depth_acc, T_final, last, entry_count, entry_weight)
+                    levels, steps, bg64, width, height, tiles_x, rgb, depth_acc, T_final, last, entry_count, entry_weight)
         entry_stats = np.empty((n_entries, 2))
         entry_stats[:, 0] = entry_count
         entry_stats[:, 1] = entry_weight
@@ -646,7 +650,7 @@ class _Render(torch.autograd.Function):
 
         ctx.saved = (m64, s64, qr64, qnorm, q64, o64, c_lin, c64, bg64, vm, (fx, fy, cx, cy), width, height,
                      means2d, conics, depths, radii, g_off, entry_gid, tile_off, tile_entries, T_final, last,
-                     tiles_x, depth_acc, alpha, alpha_c)
+                     tiles_x, depth_acc, alpha, alpha_c, levels, steps)
         ctx.dtype = dt
         out_radii = torch.from_numpy(radii)
         n_touched = torch.from_numpy(stats[:, 0].astype(np.int32))
@@ -658,7 +662,7 @@ class _Render(torch.autograd.Function):
     def backward(ctx, v_rgb, v_depth, v_alpha, _v_radii, _v_touched, _v_wsum):
         (m64, s64, qr64, qnorm, q64, o64, c_lin, c64, bg64, vm, (fx, fy, cx, cy), width, height,
          means2d, conics, depths, radii, g_off, entry_gid, tile_off, tile_entries, T_final, last,
-         tiles_x, depth_acc, alpha, alpha_c) = ctx.saved
+         tiles_x, depth_acc, alpha, alpha_c, levels, steps) = ctx.saved
         dt = ctx.dtype
         n = m64.shape[0]
         v_rgb64 = _np64(v_rgb) if v_rgb is not None else np.zeros((height, width, 3))
@@ -669,7 +673,7 @@ class _Render(torch.autograd.Function):
         v_alpha64 = v_alpha64 - np.where(alpha >= 1e-10, v_ed * depth_acc / (alpha_c * alpha_c), 0.0)
         entry_grad = np.zeros((entry_gid.shape[0], N_GRAD))
         _raster_bwd(tile_off, tile_entries, entry_gid, means2d, conics, o64, c64, depths, radii,
-                    bg64, width, height, tiles_x, T_final, last, v_rgb64, v_dacc, v_alpha64, entry_grad)
+                    levels, steps, bg64, width, height, tiles_x, T_final, last, v_rgb64, v_dacc, v_alpha64, entry_grad)
         grad = np.zeros((n, N_GRAD))
         _reduce_entries(g_off, entry_grad, grad)
         v_means = np.empty((n, 3))
