@@ -70,6 +70,9 @@ class VoronoiConfig:
     frontier_dist_m: float = 1.0
     """A node is a frontier node when a frontier cell (unknown, touching known free) is within this distance.
     The skeleton stops about half a passage width short of an open end, so this should exceed that."""
+    min_frontier_m: float = 0.3
+    """Frontier pieces (8-connected frontier cells) shorter than this (cells x cell size) are ignored: specks of
+    unseen floor inside explored space, e.g. between sparse far rays, are not worth a trip."""
     min_component_m: float = 0.25
     """Connected components of the graph whose total edge length is below this are dropped (specks)."""
 
@@ -78,6 +81,7 @@ class VoronoiConfig:
         _require(self.node_spacing_m > 0.0, "voronoi.node_spacing_m", self.node_spacing_m, "> 0 m")
         _require(self.min_spur_m >= 0.0, "voronoi.min_spur_m", self.min_spur_m, ">= 0 m")
         _require(self.frontier_dist_m >= 0.0, "voronoi.frontier_dist_m", self.frontier_dist_m, ">= 0 m")
+        _require(self.min_frontier_m >= 0.0, "voronoi.min_frontier_m", self.min_frontier_m, ">= 0 m")
         _require(self.min_component_m >= 0.0, "voronoi.min_component_m", self.min_component_m, ">= 0 m")
 
 
@@ -104,13 +108,20 @@ def frontier_cells(free: np.ndarray, unknown: np.ndarray) -> np.ndarray:
     return unknown & ndimage.binary_dilation(free, structure=_EIGHT)
 
 
-def frontier_distance_m(free: np.ndarray, unknown: np.ndarray, cell_m: float) -> np.ndarray:
+def frontier_distance_m(free: np.ndarray, unknown: np.ndarray, cell_m: float, min_frontier_m: float = 0.0) -> np.ndarray:
     """float64 (H, W): distance from each cell centre to the nearest frontier cell centre (inf if none).
 
-    The ring of cells just outside the grid counts as unknown.
+    The ring of cells just outside the grid counts as unknown. Frontier pieces (8-connected)
+    with fewer than ``min_frontier_m / cell_m`` cells are ignored.
     """
     f = np.pad(unknown, 1, constant_values=True)
     fr = f & ndimage.binary_dilation(np.pad(free, 1, constant_values=False), structure=_EIGHT)
+    if min_frontier_m > 0 and fr.any():
+        labels, n = ndimage.label(fr, structure=_EIGHT)
+        sizes = np.bincount(labels.ravel(), minlength=n + 1)
+        big = sizes * cell_m >= min_frontier_m
+        big[0] = False
+        fr = big[labels]
     if not fr.any():
         return np.full(free.shape, np.inf)
     return ndimage.distance_transform_edt(~fr)[1:-1, 1:-1] * cell_m
@@ -288,7 +299,7 @@ def build_voronoi_graph(free: np.ndarray, unknown: np.ndarray, cell_m: float, or
     cells, nbrs = _pixel_adjacency(skel)
     if len(cells) == 0:
         return G
-    fdist = frontier_distance_m(free, unknown, cell_m)
+    fdist = frontier_distance_m(free, unknown, cell_m, cfg.min_frontier_m)
     frontier_px = fdist[cells[:, 0], cells[:, 1]] <= cfg.frontier_dist_m
     topo = _trace(cells, nbrs)
     # tiny self-loops (a junction blob touching itself through one pixel) are not rings

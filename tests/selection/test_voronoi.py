@@ -155,3 +155,24 @@ def test_bad_config_raises():
         VoronoiConfig(node_spacing_m=0.0)
     with pytest.raises(ConfigError):
         VoronoiConfig(robot_radius_m=-1.0)
+
+
+def test_a_speck_of_unknown_floor_inside_the_room_is_not_a_frontier():
+    free = corridor()
+    unknown = np.zeros_like(free)
+    free[20, 60] = False                         # one unseen cell between sparse rays
+    unknown[20, 60] = True
+    G = build(free, unknown)
+    assert not any(nx.get_node_attributes(G, "frontier").values())
+    G_all = build(free, unknown, VoronoiConfig(min_frontier_m=0.0))
+    assert any(nx.get_node_attributes(G_all, "frontier").values())
+
+
+def test_selection_and_planning_import_without_torch():
+    import subprocess
+    import sys
+    code = ("import sys; import dynactivegs.selection.occupancy, dynactivegs.selection.voronoi, "
+            "dynactivegs.selection.subregions, dynactivegs.planning.paths, dynactivegs.planning.actions; "
+            "print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
