@@ -16,8 +16,8 @@ loss minimised over the MLP's weights is
       + 0.5 * mean_M[ log beta ]                      (3) keeps beta from growing without bound
       + w_reg * L_reg                                 (4) feature-similarity regulariser
 
-- ``r_ssim = clip((1 - SSIM(I, I^)) / 2, 0, 1)``, SSIM computed per pixel in a 5x5 window and
-  averaged over RGB; it does not depend on beta, so it is computed once per frame.
+- ``r_ssim = clip((1 - SSIM(I, I^)) / 2, 0, 1)``, SSIM computed per pixel in a 7x7 Gaussian window
+  (sigma 1.5 px) and averaged over RGB; it does not depend on beta, so it is computed once per frame.
 - ``r_depth = min(|D - D^|, depth_clip_m)``, in metres.
 - For a fixed residual ``r`` the data terms ``r / beta^2 + 0.5 log beta`` are minimised at
   ``beta = 2 sqrt(r)``: beta grows where the map cannot explain the frame (moving people).
@@ -34,12 +34,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import kornia
 import numpy as np
 import torch
 import torch.nn.functional as F
 
 from dynactivegs.errors import ConfigError
+from dynactivegs.splat.losses import ssim_map
 
 
 @dataclass(frozen=True, slots=True)
@@ -150,9 +150,9 @@ def residuals(rgb: np.ndarray, depth_m: np.ndarray, rgb_hat: np.ndarray, depth_h
     ``alpha_hat`` (H, W) accumulated opacity of the render.
     """
     assert rgb.shape[:2] == depth_m.shape == depth_hat_m.shape == alpha_hat.shape == rgb_hat.shape[:2]
-    i = torch.tensor(rgb).permute(2, 0, 1)[None].float() / 255.0
-    i_hat = torch.tensor(rgb_hat, dtype=torch.float32).permute(2, 0, 1)[None]
-    ssim = kornia.metrics.ssim(i, i_hat.clamp(0, 1), window_size=5)[0].mean(dim=0)
+    i = torch.tensor(rgb).float() / 255.0
+    i_hat = torch.tensor(rgb_hat, dtype=torch.float32).clamp(0, 1)
+    ssim = ssim_map(i, i_hat, window=7, sigma=1.5)
     r_ssim = ((1.0 - ssim) / 2.0).clamp(0.0, 1.0)
     d = torch.tensor(depth_m, dtype=torch.float32)
     d_hat = torch.tensor(depth_hat_m, dtype=torch.float32)
