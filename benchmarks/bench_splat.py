@@ -12,7 +12,8 @@ approaches this divided by k; on a shared machine the wall time is what other pr
 leave). The reference is timed with fewer repeats where it is
 slow (the ``ref reps`` column says how many). Then, each in a fresh subprocess so that
 nothing else is counted, the peak resident memory of one forward+backward of 50k Gaussians
-at 320x184 (the process's VmHWM: the whole process, Python and torch included). Where a CUDA device and gsplat are present, the gsplat backend is timed too.
+at 320x184 (the process's VmHWM: the whole process, Python and torch included). Where a
+CUDA device and gsplat are present, the gsplat backend is timed too.
 
 The scene is a depth-map-like cloud: Gaussians at random pixels and depths 1-5 m, screen
 size ~0.8 px x sqrt(pixels per Gaussian), opacity 0.3-0.95, random rotations and colours.

@@ -56,8 +56,8 @@ from dynactivegs.splat.gaussians import SH_C0
 if numba.config.THREADING_LAYER == "default" and "NUMBA_THREADING_LAYER" not in os.environ:
     numba.config.THREADING_LAYER = "workqueue"
 
-N_GRAD = 10
-SPAN_MARGIN = 1e-4  # px added on both sides of each row span  # per-entry gradient row: mean2d x, y; conic a, b, c; opacity; colour r, g, b; depth
+N_GRAD = 10         # per-entry gradient row: mean2d x, y; conic a, b, c; opacity; colour r, g, b; depth
+SPAN_MARGIN = 1e-4  # px added on both sides of each row span and row range
 
 
 # --------------------------------------------------------------------------- 3x3 helpers
@@ -328,10 +328,10 @@ def _bin_tiles(means2d, radii, depths, tiles_x, tiles_y):
 
 
 @njit(cache=True)
-def _rows(my, ry, y0, ph):
-    """Rows of a tile that the screen box [my - ry, my + ry] may reach (1 px margin)."""
-    v0 = int(max(float(y0), math.floor(my - ry) - 1.0))
-    v1 = int(min(float(y0 + ph - 1), math.ceil(my + ry) + 1.0))
+def _rows(my, ext_y, y0, ph):
+    """Rows [v0, v1] of a tile whose pixel centres lie within ext_y (+ SPAN_MARGIN) of my."""
+    v0 = int(max(float(y0), math.ceil(my - ext_y - 0.5 - SPAN_MARGIN)))
+    v1 = int(min(float(y0 + ph - 1), math.floor(my + ext_y - 0.5 + SPAN_MARGIN)))
     return v0, v1
 
 
@@ -363,7 +363,7 @@ def _row_span(mx, dy, A, B, C, level, x0, pw):
 # --------------------------------------------------------------------------- rasterization
 @njit(cache=True, parallel=True, fastmath=True)
 def _raster_fwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors, depths, radii,
-                levels, steps, bg, width, height, tiles_x,
+                levels, steps, ext_y, bg, width, height, tiles_x,
                 out_rgb, out_depth, out_T, out_last, entry_count, entry_weight):
     """Front-to-back compositing per tile; also each pixel's final T and last contributor."""
     n_tiles = tile_off.shape[0] - 1
@@ -387,7 +387,7 @@ def _raster_fwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors
             A, B, C = conics[g, 0], conics[g, 1], conics[g, 2]
             o = opac[g]
             cr, cg, cb, z = colors[g, 0], colors[g, 1], colors[g, 2], depths[g]
-            v0, v1 = _rows(my, float(radii[g, 1]), y0, ph)
+            v0, v1 = _rows(my, ext_y[g], y0, ph)
             level = levels[g]
             step = steps[g]
             cnt = 0
@@ -450,7 +450,8 @@ def _raster_fwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors
 
 @njit(cache=True, parallel=True, fastmath=True)
 def _raster_bwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors, depths, radii,
-                levels, steps, bg, width, height, tiles_x, T_final, last, v_rgb, v_depth, v_alpha, entry_grad):
+                levels, steps, ext_y, bg, width, height, tiles_x, T_final, last, v_rgb, v_depth, v_alpha,
+                entry_grad):
     """Back-to-front pass per tile; writes each entry's gradient row (see N_GRAD).
 
     Per pixel it keeps T_i (recovered by division), the upstream gradients, and
@@ -494,7 +495,7 @@ def _raster_bwd(tile_off, tile_entries, entry_gid, means2d, conics, opac, colors
             A, B, C = conics[g, 0], conics[g, 1], conics[g, 2]
             o = opac[g]
             cr, cg, cb, z = colors[g, 0], colors[g, 1], colors[g, 2], depths[g]
-            v0, v1 = _rows(my, float(radii[g, 1]), y0, ph)
+            v0, v1 = _rows(my, ext_y[g], y0, ph)
             level = levels[g]
             step = steps[g]
             gx = 0.0
@@ -637,8 +638,12 @@ class _Render(torch.autograd.Function):
         # sigma above which o exp(-sigma) < ALPHA_MIN for sure: ln(o / ALPHA_MIN), padded for rounding
         levels = np.log(np.maximum(o64 / ALPHA_MIN, 1.0)) * (1.0 + 1e-9) + 1e-9
         steps = np.exp(-conics[:, 0])
+        # half height of the ellipse sigma <= level: sqrt(2 level cov2d_yy), cov2d_yy = a / (a c - b^2)
+        det_conic = np.where(radii[:, 0] > 0, conics[:, 0] * conics[:, 2] - conics[:, 1] ** 2, 1.0)
+        ext_y = np.sqrt(2.0 * levels * conics[:, 0] / det_conic)
         _raster_fwd(tile_off, tile_entries, entry_gid, means2d, conics, o64, c64, depths, radii,
-                    levels, steps, bg64, width, height, tiles_x, rgb, depth_acc, T_final, last, entry_count, entry_weight)
+                    levels, steps, ext_y, bg64, width, height, tiles_x, rgb, depth_acc, T_final, last,
+                    entry_count, entry_weight)
         entry_stats = np.empty((n_entries, 2))
         entry_stats[:, 0] = entry_count
         entry_stats[:, 1] = entry_weight
@@ -650,7 +655,7 @@ class _Render(torch.autograd.Function):
 
         ctx.saved = (m64, s64, qr64, qnorm, q64, o64, c_lin, c64, bg64, vm, (fx, fy, cx, cy), width, height,
                      means2d, conics, depths, radii, g_off, entry_gid, tile_off, tile_entries, T_final, last,
-                     tiles_x, depth_acc, alpha, alpha_c, levels, steps)
+                     tiles_x, depth_acc, alpha, alpha_c, levels, steps, ext_y)
         ctx.dtype = dt
         out_radii = torch.from_numpy(radii)
         n_touched = torch.from_numpy(stats[:, 0].astype(np.int32))
@@ -662,7 +667,7 @@ class _Render(torch.autograd.Function):
     def backward(ctx, v_rgb, v_depth, v_alpha, _v_radii, _v_touched, _v_wsum):
         (m64, s64, qr64, qnorm, q64, o64, c_lin, c64, bg64, vm, (fx, fy, cx, cy), width, height,
          means2d, conics, depths, radii, g_off, entry_gid, tile_off, tile_entries, T_final, last,
-         tiles_x, depth_acc, alpha, alpha_c, levels, steps) = ctx.saved
+         tiles_x, depth_acc, alpha, alpha_c, levels, steps, ext_y) = ctx.saved
         dt = ctx.dtype
         n = m64.shape[0]
         v_rgb64 = _np64(v_rgb) if v_rgb is not None else np.zeros((height, width, 3))
@@ -673,7 +678,8 @@ class _Render(torch.autograd.Function):
         v_alpha64 = v_alpha64 - np.where(alpha >= 1e-10, v_ed * depth_acc / (alpha_c * alpha_c), 0.0)
         entry_grad = np.zeros((entry_gid.shape[0], N_GRAD))
         _raster_bwd(tile_off, tile_entries, entry_gid, means2d, conics, o64, c64, depths, radii,
-                    levels, steps, bg64, width, height, tiles_x, T_final, last, v_rgb64, v_dacc, v_alpha64, entry_grad)
+                    levels, steps, ext_y, bg64, width, height, tiles_x, T_final, last, v_rgb64, v_dacc, v_alpha64,
+                    entry_grad)
         grad = np.zeros((n, N_GRAD))
         _reduce_entries(g_off, entry_grad, grad)
         v_means = np.empty((n, 3))

@@ -123,7 +123,8 @@ def _parse_header(raw: bytes, path: Path) -> tuple[str, int, list[tuple[str, str
                 raise DagsError(f"{path}: unsupported vertex property '{line.strip()}'; expected scalar properties")
             props.append((words[2], _PLY_TYPES[words[1]]))
     if fmt not in ("binary_little_endian", "binary_big_endian", "ascii"):
-        raise DagsError(f"{path}: unsupported PLY format '{fmt}'; expected binary_little_endian, binary_big_endian or ascii")
+        raise DagsError(f"{path}: unsupported PLY format '{fmt}'; "
+                        "expected binary_little_endian, binary_big_endian or ascii")
     if n_vertex < 0:
         raise DagsError(f"{path}: no vertex element; expected the INRIA 3DGS layout")
     return fmt, n_vertex, props, body_start

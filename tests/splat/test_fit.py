@@ -32,7 +32,8 @@ def test_adam_fit_reduces_loss_tenfold():
     ])
 
     def loss_of(out):
-        return l1(out.rgb, target.rgb) + 0.1 * depth_l1(out.depth, target.depth) + l1(out.alpha[..., None], target.alpha[..., None])
+        return (l1(out.rgb, target.rgb) + 0.1 * depth_l1(out.depth, target.depth)
+                + l1(out.alpha[..., None], target.alpha[..., None]))
 
     losses = []
     for _ in range(300):
@@ -41,5 +42,5 @@ def test_adam_fit_reduces_loss_tenfold():
         opt.zero_grad()
         loss.backward()
         opt.step()
-        losses.append(float(loss))
+        losses.append(float(loss.detach()))
     assert losses[-1] <= losses[0] / 10, f"loss {losses[0]:.4f} -> {losses[-1]:.4f}"

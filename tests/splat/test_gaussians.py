@@ -119,7 +119,8 @@ def test_ply_header_is_the_inria_layout(tmp_path):
 
 def _write_handmade(path, fmt: str, rows: list[list[float]], names: list[str]) -> None:
     header = f"ply\nformat {fmt} 1.0\nelement vertex {len(rows)}\n"
-    header += "".join(f"property float {n}\n" for n in names) + "element face 0\nproperty list uchar int vertex_indices\nend_header\n"
+    header += "".join(f"property float {n}\n" for n in names)
+    header += "element face 0\nproperty list uchar int vertex_indices\nend_header\n"
     if fmt == "ascii":
         body = "".join(" ".join(repr(v) for v in r) + "\n" for r in rows).encode()
     else:
