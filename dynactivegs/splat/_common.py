@@ -11,7 +11,7 @@ so that the CPU backends and gsplat on CUDA render the same image:
   that Gaussians far outside the image do not get huge footprints.
 - A Gaussian is culled when its camera z is below ``NEAR_PLANE`` (or above ``FAR_PLANE``),
   its peak opacity is below ``ALPHA_MIN``, its 2D covariance is not positive definite, or
-  its screen box misses the image.
+  its screen box misses the image (non-finite values fail these tests and are culled too).
 - Its screen box has half-widths ``ceil(extend * sqrt(cov2d_ii))`` px with
   ``extend = min(EXTEND_MAX, sqrt(2 ln(opacity / ALPHA_MIN)))``: the opacity-aware bound of
   Radl et al. 2024 (StopThePop, app. B.2), which contains every pixel where the Gaussian's
@@ -38,6 +38,7 @@ ALPHA_MAX = 0.999         # alpha clamp (gsplat's; INRIA's 3DGS uses 0.99)
 T_MIN = 1e-4              # a pixel stops once its transmittance would reach this
 EXTEND_MAX = 3.33         # max screen-box half-width in standard deviations
 FOV_CLAMP = 0.3           # Jacobian uses x/z clamped to (1 + FOV_CLAMP) x the half field of view
+RADIUS_MAX = 2.0 ** 30    # px; screen-box half-widths are capped so that they fit in int32
 
 
 def world_to_cam(T_world_cam: np.ndarray | torch.Tensor) -> np.ndarray:

@@ -45,7 +45,7 @@ import torch
 from numba import njit, prange
 
 from dynactivegs.splat._common import (
-    ALPHA_MAX, ALPHA_MIN, EPS2D, EXTEND_MAX, FAR_PLANE, FOV_CLAMP, T_MIN, TILE,
+    ALPHA_MAX, ALPHA_MIN, EPS2D, EXTEND_MAX, FAR_PLANE, FOV_CLAMP, RADIUS_MAX, T_MIN, TILE,
 )
 from dynactivegs.splat.gaussians import SH_C0
 
@@ -115,7 +115,7 @@ def _project_fwd(means, quats, scales, opac, vm, fx, fy, cx, cy, width, height, 
         radii[g, 1] = 0
         px, py, pz = means[g, 0], means[g, 1], means[g, 2]
         z = W[6] * px + W[7] * py + W[8] * pz + vm[2, 3]
-        if z < near or z > FAR_PLANE:
+        if not (z >= near and z <= FAR_PLANE):   # written so that NaN is culled too
             continue
         x = W[0] * px + W[1] * py + W[2] * pz + vm[0, 3]
         y = W[3] * px + W[4] * py + W[5] * pz + vm[1, 3]
@@ -137,19 +137,19 @@ def _project_fwd(means, quats, scales, opac, vm, fx, fy, cx, cy, width, height, 
         b = r01 * j11 + r02 * j12
         c = r11 * j11 + r12 * j12 + EPS2D
         det = a * c - b * b
-        if det <= 0.0:
+        if not det > 0.0:
             continue
         o = opac[g]
-        if o < ALPHA_MIN:
+        if not o >= ALPHA_MIN:
             continue
         extend = min(EXTEND_MAX, math.sqrt(2.0 * math.log(max(o / ALPHA_MIN, 1.0))))
-        rx = math.ceil(extend * math.sqrt(a))
-        ry = math.ceil(extend * math.sqrt(c))
+        rx = float(math.ceil(min(extend * math.sqrt(a), RADIUS_MAX)))
+        ry = float(math.ceil(min(extend * math.sqrt(c), RADIUS_MAX)))
         if rx <= 0.0 and ry <= 0.0:
             continue
         mx = fx * x / z + cx
         my = fy * y / z + cy
-        if mx + rx <= 0.0 or mx - rx >= width or my + ry <= 0.0 or my - ry >= height:
+        if not (mx + rx > 0.0 and mx - rx < width and my + ry > 0.0 and my - ry < height):
             continue
         radii[g, 0] = np.int32(rx)
         radii[g, 1] = np.int32(ry)
@@ -612,10 +612,11 @@ class _Render(torch.autograd.Function):
         n = means.shape[0]
         m64, ls64, qr64, ol64, sh64, bg64 = (_np64(x) for x in (means, log_scales, quats, opacity_logits, sh0,
                                                                  background))
-        s64 = np.exp(ls64)
-        o64 = 1.0 / (1.0 + np.exp(-ol64))
-        qnorm = np.sqrt((qr64 * qr64).sum(axis=1, keepdims=True))
-        q64 = qr64 / qnorm
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # like torch: inf / nan, no warning
+            s64 = np.exp(ls64)
+            o64 = 1.0 / (1.0 + np.exp(-ol64))
+            qnorm = np.sqrt((qr64 * qr64).sum(axis=1, keepdims=True))
+            q64 = qr64 / qnorm
         c_lin = SH_C0 * sh64 + 0.5
         c64 = np.maximum(c_lin, 0.0)
         vm = np.ascontiguousarray(viewmat, dtype=np.float64)

@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from dynactivegs.splat._common import (
-    ALPHA_MAX, ALPHA_MIN, EPS2D, EXTEND_MAX, FAR_PLANE, FOV_CLAMP, T_MIN, TILE,
+    ALPHA_MAX, ALPHA_MIN, EPS2D, EXTEND_MAX, FAR_PLANE, FOV_CLAMP, RADIUS_MAX, T_MIN, TILE,
 )
 
 
@@ -82,8 +82,8 @@ def project(means: torch.Tensor, quats: torch.Tensor, scales: torch.Tensor, opac
     with torch.no_grad():
         o = opacities[front]
         extend = torch.sqrt(2.0 * torch.log(torch.clamp_min(o / ALPHA_MIN, 1.0))).clamp(max=EXTEND_MAX)
-        rx = torch.ceil(extend * torch.sqrt(a))
-        ry = torch.ceil(extend * torch.sqrt(c))
+        rx = torch.ceil((extend * torch.sqrt(a)).clamp(max=RADIUS_MAX))
+        ry = torch.ceil((extend * torch.sqrt(c)).clamp(max=RADIUS_MAX))
         mx, my = means2d[:, 0], means2d[:, 1]
         keep = ((det > 0) & (o >= ALPHA_MIN) & ~((rx <= 0) & (ry <= 0))
                 & (mx + rx > 0) & (mx - rx < width) & (my + ry > 0) & (my - ry < height))

@@ -45,7 +45,7 @@ def sh0_to_rgb(sh0: torch.Tensor) -> torch.Tensor:
     return torch.clamp_min(SH_C0 * sh0 + 0.5, 0.0)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Gaussians:
     """A set of N 3D Gaussians as raw (pre-activation) parameters, all on one device and dtype.
 

@@ -30,7 +30,7 @@ from dynactivegs.splat.gaussians import Gaussians
 Backend = Literal["auto", "cpu", "cuda", "reference"]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class RenderOut:
     """One rendered view. Images are (H, W[, 3]) in the Gaussians' dtype, on their device."""
 

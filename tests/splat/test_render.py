@@ -205,6 +205,27 @@ def test_fast_backend_is_deterministic_across_thread_counts():
         assert torch.equal(a, b)
 
 
+def test_non_finite_gaussians_are_culled_not_drawn():
+    gen = torch.Generator().manual_seed(9)
+    g, K, T = random_scene(40, 32, 24, gen, adversarial=False)
+    clean = [render(g, K, T, 32, 24, backend=b) for b in ("reference", "cpu")]
+    means, log_scales, opacity_logits = g.means.clone(), g.log_scales.clone(), g.opacity_logits.clone()
+    means[0, 1] = float("nan")
+    log_scales[1, 2] = float("nan")
+    opacity_logits[2] = float("nan")
+    log_scales[3] = 1e4            # exp overflows to inf
+    broken = Gaussians(means, log_scales, g.quats, opacity_logits, g.sh0)
+    keep = torch.ones(40, dtype=torch.bool)
+    keep[:4] = False
+    for backend in ("reference", "cpu"):
+        out = render(broken, K, T, 32, 24, backend=backend)
+        assert not out.visible[:4].any()
+        assert torch.isfinite(out.rgb).all() and torch.isfinite(out.depth).all()
+        without = render(g.masked(keep), K, T, 32, 24, backend=backend)
+        assert torch.allclose(out.rgb, without.rgb, atol=1e-12)
+    assert torch.allclose(clean[0].rgb, clean[1].rgb, atol=1e-9)
+
+
 def test_empty_map_renders_background():
     K, T = camera(20, 10)
     for backend in ("reference", "cpu"):
