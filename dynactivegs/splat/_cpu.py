@@ -1,7 +1,8 @@
 """Fast CPU rasterizer: numba kernels (``parallel=True``, ``cache=True``) and a hand-written backward.
 
 Same image model as :mod:`dynactivegs.splat._reference` (see :mod:`dynactivegs.splat._common`);
-the kernels compute in float64 whatever the input dtype, and outputs are cast back.
+the kernels compute in float64 whatever the input dtype, and outputs are cast back. Raw
+parameters go in; activations, expected depth and their derivatives are done here in NumPy.
 
 Pipeline (forward), each step a kernel below:
 
@@ -12,8 +13,13 @@ Pipeline (forward), each step a kernel below:
    counting sort by tile visiting Gaussians front to back, gives every tile its list in
    depth order with ties in index order (as gsplat's radix sort of (tile | depth) keys).
 3. ``_raster_fwd`` (parallel over tiles): front-to-back compositing. Within a tile the
-   Gaussians are visited in depth order and each updates only the pixels of its screen box,
-   which is the same per-pixel sequence as a pixel-major loop but skips far pixels.
+   Gaussians are visited in depth order and each updates only the pixels inside its ellipse
+   ``sigma <= ln(o / ALPHA_MIN)`` (rows from its exact height, per row the interval solved
+   from the quadratic, both padded by ``SPAN_MARGIN`` px and then tested exactly). Outside
+   that ellipse alpha < 1/255, so this is the same per-pixel sequence as a pixel-major loop
+   over the tile list, minus pixels that would be skipped anyway. Along a row,
+   o exp(-sigma) is updated by two multiplications per pixel (the exponent is quadratic
+   in u), starting from two exps at the row's first pixel, where it is about 1/255 or more.
 
 Backward: ``_raster_bwd`` walks each tile back to front from every pixel's last
 contributor, recovering T_i = T_{i+1} / (1 - alpha_i) (as gsplat does), and accumulates the

@@ -244,6 +244,15 @@ def test_cuda_backend_without_cuda_is_a_one_line_error():
     assert "\n" not in str(err.value)
 
 
+def test_auto_backend_is_cpu_without_cuda_and_matches_it():
+    gen = torch.Generator().manual_seed(10)
+    g, K, T = random_scene(50, 32, 24, gen, adversarial=False)
+    auto = render(g, K, T, 32, 24)
+    assert auto.backend == ("cuda" if gsplat_available() else "cpu")
+    if auto.backend == "cpu":
+        assert torch.equal(auto.rgb, render(g, K, T, 32, 24, backend="cpu").rgb)
+
+
 def test_bad_camera_inputs_are_one_line_errors():
     K, T = camera(20, 10)
     g = Gaussians.empty()
