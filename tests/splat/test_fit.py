@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import torch
-from _splat_scenes import random_scene
 
 from dynactivegs.splat import Gaussians, render
 from dynactivegs.splat.losses import depth_l1, l1
+from tests.splat._splat_scenes import random_scene
 
 
 def test_adam_fit_reduces_loss_tenfold():

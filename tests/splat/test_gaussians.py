@@ -7,11 +7,11 @@ import struct
 import numpy as np
 import pytest
 import torch
-from _splat_scenes import camera, random_scene
 
 from dynactivegs.errors import DagsError
 from dynactivegs.splat import SH_C0, Gaussians, render
 from dynactivegs.splat.ply import read_ply, write_ply
+from tests.splat._splat_scenes import camera, random_scene
 
 
 def _assert_bit_equal(a: Gaussians, b: Gaussians) -> None:

@@ -17,12 +17,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
-from _splat_scenes import camera, random_scene
 
 from dynactivegs.errors import DagsError
 from dynactivegs.splat import Gaussians, render
-from dynactivegs.splat.render import gsplat_available
 from dynactivegs.splat.gaussians import rgb_to_sh0
+from dynactivegs.splat.render import gsplat_available
+from tests.splat._splat_scenes import camera, random_scene
 
 GRAD_NAMES = ("means", "log_scales", "quats", "opacity_logits", "sh0", "background")
 
