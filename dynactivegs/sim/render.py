@@ -49,12 +49,18 @@ class PeopleMesh:
         offsets = np.array([0, len(self.vertices_m)]) if self.vertex_offsets is None else self.vertex_offsets
         T_cam_world = np.linalg.inv(T_world_cam)
         pc = self.vertices_m.astype(np.float64) @ T_cam_world[:3, :3].T + T_cam_world[:3, 3]
+        # Frustum side planes through the camera centre: x >= x_lo z, x <= x_hi z, same for y.
+        x_lo, x_hi = -K[0, 2] / K[0, 0], (width - K[0, 2]) / K[0, 0]
+        y_lo, y_hi = -K[1, 2] / K[1, 1], (height - K[1, 2]) / K[1, 1]
         boxes = {}
         for p, (a, b) in enumerate(zip(offsets[:-1], offsets[1:])):
             q = pc[a:b]
             if len(q) == 0 or q[:, 2].max() < near_m:
                 continue
-            if q[:, 2].min() < near_m:
+            x, y, z = q[:, 0], q[:, 1], q[:, 2]
+            if (x < x_lo * z).all() or (x > x_hi * z).all() or (y < y_lo * z).all() or (y > y_hi * z).all():
+                continue  # entirely outside one side plane of the view frustum
+            if z.min() < near_m:
                 boxes[p] = (0, 0, width, height)
                 continue
             u = K[0, 0] * q[:, 0] / q[:, 2] + K[0, 2]
