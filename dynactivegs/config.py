@@ -10,12 +10,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-from dynactivegs.errors import ConfigError
+from dynactivegs.errors import check_config
 
-
-def _require(cond: bool, name: str, value: object, allowed: str) -> None:
-    if not cond:
-        raise ConfigError(f"bad config value {name}={value!r}: must be {allowed}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -40,14 +36,14 @@ class CameraConfig:
     """Standard deviation of additive depth noise, scaled by depth^2 / 1 m (Kinect-like); 0 turns it off."""
 
     def __post_init__(self) -> None:
-        _require(8 <= self.width_px <= 4096, "camera.width_px", self.width_px, "in [8, 4096]")
-        _require(8 <= self.height_px <= 4096, "camera.height_px", self.height_px, "in [8, 4096]")
-        _require(1.0 < self.hfov_deg < 179.0, "camera.hfov_deg", self.hfov_deg, "in (1, 179)")
-        _require(1.0 < self.vfov_deg < 179.0, "camera.vfov_deg", self.vfov_deg, "in (1, 179)")
-        _require(0.2 <= self.height_m <= 2.2, "camera.height_m", self.height_m, "in [0.2, 2.2] m")
-        _require(0.0 < self.min_depth_m < self.max_depth_m, "camera.min_depth_m", self.min_depth_m,
+        check_config(8 <= self.width_px <= 4096, "camera.width_px", self.width_px, "in [8, 4096]")
+        check_config(8 <= self.height_px <= 4096, "camera.height_px", self.height_px, "in [8, 4096]")
+        check_config(1.0 < self.hfov_deg < 179.0, "camera.hfov_deg", self.hfov_deg, "in (1, 179)")
+        check_config(1.0 < self.vfov_deg < 179.0, "camera.vfov_deg", self.vfov_deg, "in (1, 179)")
+        check_config(0.2 <= self.height_m <= 2.2, "camera.height_m", self.height_m, "in [0.2, 2.2] m")
+        check_config(0.0 < self.min_depth_m < self.max_depth_m, "camera.min_depth_m", self.min_depth_m,
                  "positive and below camera.max_depth_m")
-        _require(self.depth_noise_std_m >= 0.0, "camera.depth_noise_std_m", self.depth_noise_std_m, ">= 0")
+        check_config(self.depth_noise_std_m >= 0.0, "camera.depth_noise_std_m", self.depth_noise_std_m, ">= 0")
 
     @property
     def fx(self) -> float:
@@ -72,10 +68,10 @@ class RobotConfig:
     """Anything between 0.1 m above the floor and this height is an obstacle for the robot."""
 
     def __post_init__(self) -> None:
-        _require(0.01 <= self.forward_step_m <= 2.0, "robot.forward_step_m", self.forward_step_m, "in [0.01, 2] m")
-        _require(0.5 <= self.turn_step_deg <= 90.0, "robot.turn_step_deg", self.turn_step_deg, "in [0.5, 90] deg")
-        _require(0.05 <= self.radius_m <= 1.0, "robot.radius_m", self.radius_m, "in [0.05, 1] m")
-        _require(0.3 <= self.body_height_m <= 2.5, "robot.body_height_m", self.body_height_m, "in [0.3, 2.5] m")
+        check_config(0.01 <= self.forward_step_m <= 2.0, "robot.forward_step_m", self.forward_step_m, "in [0.01, 2] m")
+        check_config(0.5 <= self.turn_step_deg <= 90.0, "robot.turn_step_deg", self.turn_step_deg, "in [0.5, 90] deg")
+        check_config(0.05 <= self.radius_m <= 1.0, "robot.radius_m", self.radius_m, "in [0.05, 1] m")
+        check_config(0.3 <= self.body_height_m <= 2.5, "robot.body_height_m", self.body_height_m, "in [0.3, 2.5] m")
 
 
 @dataclass(frozen=True, slots=True)
@@ -104,17 +100,17 @@ class CrowdConfig:
     """A person whose remaining path stops shrinking for this long picks a new goal (breaks door jams)."""
 
     def __post_init__(self) -> None:
-        _require(self.count >= -1, "crowd.count", self.count, ">= 0, or -1 for the area rule")
-        _require(self.area_per_person_m2 > 0, "crowd.area_per_person_m2", self.area_per_person_m2, "> 0")
-        _require(0.0 < self.speed_mps <= 3.0, "crowd.speed_mps", self.speed_mps, "in (0, 3] m/s")
-        _require(0.1 <= self.radius_m <= 0.6, "crowd.radius_m", self.radius_m, "in [0.1, 0.6] m")
-        _require(self.min_goal_dist_m >= 0, "crowd.min_goal_dist_m", self.min_goal_dist_m, ">= 0")
-        _require(self.neighbor_dist_m > 0, "crowd.neighbor_dist_m", self.neighbor_dist_m, "> 0")
-        _require(self.time_horizon_s > 0, "crowd.time_horizon_s", self.time_horizon_s, "> 0")
-        _require(self.obstacle_time_horizon_s > 0, "crowd.obstacle_time_horizon_s",
+        check_config(self.count >= -1, "crowd.count", self.count, ">= 0, or -1 for the area rule")
+        check_config(self.area_per_person_m2 > 0, "crowd.area_per_person_m2", self.area_per_person_m2, "> 0")
+        check_config(0.0 < self.speed_mps <= 3.0, "crowd.speed_mps", self.speed_mps, "in (0, 3] m/s")
+        check_config(0.1 <= self.radius_m <= 0.6, "crowd.radius_m", self.radius_m, "in [0.1, 0.6] m")
+        check_config(self.min_goal_dist_m >= 0, "crowd.min_goal_dist_m", self.min_goal_dist_m, ">= 0")
+        check_config(self.neighbor_dist_m > 0, "crowd.neighbor_dist_m", self.neighbor_dist_m, "> 0")
+        check_config(self.time_horizon_s > 0, "crowd.time_horizon_s", self.time_horizon_s, "> 0")
+        check_config(self.obstacle_time_horizon_s > 0, "crowd.obstacle_time_horizon_s",
                  self.obstacle_time_horizon_s, "> 0")
-        _require(0.0 < self.substep_s <= 1.0, "crowd.substep_s", self.substep_s, "in (0, 1] s")
-        _require(self.stuck_timeout_s > 0, "crowd.stuck_timeout_s", self.stuck_timeout_s, "> 0")
+        check_config(0.0 < self.substep_s <= 1.0, "crowd.substep_s", self.substep_s, "in (0, 1] s")
+        check_config(self.stuck_timeout_s > 0, "crowd.stuck_timeout_s", self.stuck_timeout_s, "> 0")
 
 
 @dataclass(frozen=True, slots=True)
@@ -138,12 +134,12 @@ class SimConfig:
     crowd: CrowdConfig = field(default_factory=CrowdConfig)
 
     def __post_init__(self) -> None:
-        _require(bool(self.scene), "sim.scene", self.scene, "a scene name or a mesh path")
-        _require(self.mesh_up_axis in ("auto", "x", "y", "z", "-x", "-y", "-z"), "sim.mesh_up_axis",
+        check_config(bool(self.scene), "sim.scene", self.scene, "a scene name or a mesh path")
+        check_config(self.mesh_up_axis in ("auto", "x", "y", "z", "-x", "-y", "-z"), "sim.mesh_up_axis",
                  self.mesh_up_axis, "one of auto, x, y, z, -x, -y, -z")
-        _require(0.0 < self.mesh_scale < 1e6, "sim.mesh_scale", self.mesh_scale, "positive")
-        _require(0.01 <= self.grid_res_m <= 0.5, "sim.grid_res_m", self.grid_res_m, "in [0.01, 0.5] m")
-        _require(0.01 <= self.dt_s <= 10.0, "sim.dt_s", self.dt_s, "in [0.01, 10] s")
+        check_config(0.0 < self.mesh_scale < 1e6, "sim.mesh_scale", self.mesh_scale, "positive")
+        check_config(0.01 <= self.grid_res_m <= 0.5, "sim.grid_res_m", self.grid_res_m, "in [0.01, 0.5] m")
+        check_config(0.01 <= self.dt_s <= 10.0, "sim.dt_s", self.dt_s, "in [0.01, 10] s")
 
 
 @dataclass(frozen=True, slots=True)
@@ -155,4 +151,4 @@ class DagsConfig:
     sim: SimConfig = field(default_factory=SimConfig)
 
     def __post_init__(self) -> None:
-        _require(0 <= self.seed < 2**63, "seed", self.seed, "in [0, 2^63)")
+        check_config(0 <= self.seed < 2**63, "seed", self.seed, "in [0, 2^63)")

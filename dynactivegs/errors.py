@@ -23,3 +23,9 @@ class SceneError(DagsError):
 
 class ConfigError(DagsError):
     """A config value outside its allowed range or of the wrong kind."""
+
+
+def check_config(cond: bool, name: str, value: object, allowed: str) -> None:
+    """Raise :class:`ConfigError` ``bad config value NAME=VALUE: must be ALLOWED`` unless ``cond``."""
+    if not cond:
+        raise ConfigError(f"bad config value {name}={value!r}: must be {allowed}")

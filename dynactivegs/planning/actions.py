@@ -21,15 +21,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from dynactivegs.config import RobotConfig
-from dynactivegs.errors import ConfigError
+from dynactivegs.errors import check_config
 from dynactivegs.records import RobotPose2D
 from dynactivegs.selection.occupancy import backproject
 from dynactivegs.sim.robot import Action, wrap_angle
 
-
-def _require(cond: bool, name: str, value: object, allowed: str) -> None:
-    if not cond:
-        raise ConfigError(f"bad config value {name}={value!r}: must be {allowed}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,15 +52,15 @@ class ActionConfig:
     """Radius of the disc the robot must leave to count as moving."""
 
     def __post_init__(self) -> None:
-        _require(0.01 <= self.forward_step_m <= 2.0, "actions.forward_step_m", self.forward_step_m, "in [0.01, 2] m")
-        _require(0.5 <= self.turn_step_deg <= 90.0, "actions.turn_step_deg", self.turn_step_deg, "in [0.5, 90] deg")
-        _require(0.0 < self.radius_m <= 1.0, "actions.radius_m", self.radius_m, "in (0, 1] m")
-        _require(0.5 * self.forward_step_m < self.reach_tol_m, "actions.reach_tol_m", self.reach_tol_m,
+        check_config(0.01 <= self.forward_step_m <= 2.0, "actions.forward_step_m", self.forward_step_m, "in [0.01, 2] m")
+        check_config(0.5 <= self.turn_step_deg <= 90.0, "actions.turn_step_deg", self.turn_step_deg, "in [0.5, 90] deg")
+        check_config(0.0 < self.radius_m <= 1.0, "actions.radius_m", self.radius_m, "in (0, 1] m")
+        check_config(0.5 * self.forward_step_m < self.reach_tol_m, "actions.reach_tol_m", self.reach_tol_m,
                  "above half of actions.forward_step_m")
-        _require(0.0 <= self.band_lo_m < self.band_hi_m, "actions.band_lo_m", self.band_lo_m, "in [0, band_hi_m)")
-        _require(self.min_blocking_points >= 1, "actions.min_blocking_points", self.min_blocking_points, ">= 1")
-        _require(self.stuck_steps >= 1, "actions.stuck_steps", self.stuck_steps, ">= 1")
-        _require(0.0 < self.stuck_move_tol_m < self.forward_step_m, "actions.stuck_move_tol_m", self.stuck_move_tol_m,
+        check_config(0.0 <= self.band_lo_m < self.band_hi_m, "actions.band_lo_m", self.band_lo_m, "in [0, band_hi_m)")
+        check_config(self.min_blocking_points >= 1, "actions.min_blocking_points", self.min_blocking_points, ">= 1")
+        check_config(self.stuck_steps >= 1, "actions.stuck_steps", self.stuck_steps, ">= 1")
+        check_config(0.0 < self.stuck_move_tol_m < self.forward_step_m, "actions.stuck_move_tol_m", self.stuck_move_tol_m,
                  "in (0, forward_step_m)")
 
     @staticmethod

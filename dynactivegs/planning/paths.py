@@ -24,15 +24,12 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import dijkstra as _cs_dijkstra
 
-from dynactivegs.errors import ConfigError
+from dynactivegs.errors import check_config
+from dynactivegs.selection.voronoi import GraphArrays, graph_arrays  # noqa: F401 (re-exported)
 
 PlannerVariant = Literal["shortest", "dyn_edge", "dyn_edge_temporal"]
 PLANNER_VARIANTS: tuple[str, ...] = get_args(PlannerVariant)
 
-
-def _require(cond: bool, name: str, value: object, allowed: str) -> None:
-    if not cond:
-        raise ConfigError(f"bad config value {name}={value!r}: must be {allowed}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -47,47 +44,9 @@ class PathConfig:
     """gamma of eq. (13): weight of the current step in the per-edge EMA of U_m (1 = no memory)."""
 
     def __post_init__(self) -> None:
-        _require(self.variant in PLANNER_VARIANTS, "planning.variant", self.variant, f"one of {PLANNER_VARIANTS}")
-        _require(self.motion_weight >= 0.0, "planning.motion_weight", self.motion_weight, ">= 0")
-        _require(0.0 < self.ema_gamma <= 1.0, "planning.ema_gamma", self.ema_gamma, "in (0, 1]")
-
-
-@dataclass(frozen=True, slots=True)
-class GraphArrays:
-    """A graph's edges as arrays, in a fixed order (sorted by ``(u, v)``, ``u < v``)."""
-
-    n_nodes: int
-    u: np.ndarray                 # int64 (E,) lower node id
-    v: np.ndarray                 # int64 (E,) higher node id
-    length_m: np.ndarray          # float64 (E,) polyline length
-    cell_start: np.ndarray        # int64 (E + 1,) edge e's cells are cells[cell_start[e]:cell_start[e + 1]]
-    cells: np.ndarray             # int64 (C, 2) (row, col) chains from u to v, concatenated
-
-    def __post_init__(self) -> None:
-        e = self.u.shape[0]
-        assert self.v.shape == (e,) and self.length_m.shape == (e,) and self.cell_start.shape == (e + 1,)
-        assert self.cells.ndim == 2 and self.cells.shape[1] == 2 and self.cell_start[-1] == len(self.cells)
-        for a in (self.u, self.v, self.length_m, self.cell_start, self.cells):
-            a.flags.writeable = False
-
-    @property
-    def n_edges(self) -> int:
-        return int(self.u.shape[0])
-
-
-def graph_arrays(G: nx.Graph) -> GraphArrays:
-    """The edge arrays of ``G`` (nodes must be ``0..N-1``; edges need ``length_m``, and ``cells`` if line integrals are used)."""
-    n = G.number_of_nodes()
-    assert set(G.nodes) == set(range(n)), "graph nodes must be 0..N-1"
-    edges = sorted((min(a, b), max(a, b)) for a, b in G.edges)
-    u = np.array([e[0] for e in edges], np.int64)
-    v = np.array([e[1] for e in edges], np.int64)
-    length = np.array([G.edges[e]["length_m"] for e in edges], np.float64)
-    chains = [np.asarray(G.edges[e].get("cells", np.zeros((0, 2), np.int64)), np.int64).reshape(-1, 2) for e in edges]
-    counts = np.array([len(c) for c in chains], np.int64)
-    start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-    cells = np.concatenate(chains) if chains else np.zeros((0, 2), np.int64)
-    return GraphArrays(n, u, v, length, start, cells)
+        check_config(self.variant in PLANNER_VARIANTS, "planning.variant", self.variant, f"one of {PLANNER_VARIANTS}")
+        check_config(self.motion_weight >= 0.0, "planning.motion_weight", self.motion_weight, ">= 0")
+        check_config(0.0 < self.ema_gamma <= 1.0, "planning.ema_gamma", self.ema_gamma, "in (0, 1]")
 
 
 def edge_mean_along(arrays: GraphArrays, value_map: np.ndarray) -> np.ndarray:

@@ -39,12 +39,8 @@ from enum import IntEnum
 import numba
 import numpy as np
 
-from dynactivegs.errors import ConfigError
+from dynactivegs.errors import check_config
 
-
-def _require(cond: bool, name: str, value: object, allowed: str) -> None:
-    if not cond:
-        raise ConfigError(f"bad config value {name}={value!r}: must be {allowed}")
 
 
 class CellState(IntEnum):
@@ -87,21 +83,21 @@ class OccupancyConfig:
     """When a frame reaches beyond the grid, the grid grows to the enclosing multiple of this many metres."""
 
     def __post_init__(self) -> None:
-        _require(0.005 <= self.cell_m <= 1.0, "occupancy.cell_m", self.cell_m, "in [0.005, 1] m")
-        _require(0.0 <= self.band_lo_m < self.band_hi_m, "occupancy.band_lo_m", self.band_lo_m,
+        check_config(0.005 <= self.cell_m <= 1.0, "occupancy.cell_m", self.cell_m, "in [0.005, 1] m")
+        check_config(0.0 <= self.band_lo_m < self.band_hi_m, "occupancy.band_lo_m", self.band_lo_m,
                  ">= 0 and below occupancy.band_hi_m")
-        _require(self.max_range_m > 0.0, "occupancy.max_range_m", self.max_range_m, "> 0 m")
-        _require(self.beta_max > 0.0, "occupancy.beta_max", self.beta_max, "> 0")
-        _require(self.l_free < 0.0, "occupancy.l_free", self.l_free, "< 0")
-        _require(self.l_occ > 0.0, "occupancy.l_occ", self.l_occ, "> 0")
-        _require(self.logodds_min < self.free_below, "occupancy.logodds_min", self.logodds_min,
+        check_config(self.max_range_m > 0.0, "occupancy.max_range_m", self.max_range_m, "> 0 m")
+        check_config(self.beta_max > 0.0, "occupancy.beta_max", self.beta_max, "> 0")
+        check_config(self.l_free < 0.0, "occupancy.l_free", self.l_free, "< 0")
+        check_config(self.l_occ > 0.0, "occupancy.l_occ", self.l_occ, "> 0")
+        check_config(self.logodds_min < self.free_below, "occupancy.logodds_min", self.logodds_min,
                  "below occupancy.free_below")
-        _require(self.free_below <= 0.0 <= self.occupied_above, "occupancy.free_below", self.free_below,
+        check_config(self.free_below <= 0.0 <= self.occupied_above, "occupancy.free_below", self.free_below,
                  "<= 0 <= occupancy.occupied_above")
-        _require(self.occupied_above < self.logodds_max, "occupancy.logodds_max", self.logodds_max,
+        check_config(self.occupied_above < self.logodds_max, "occupancy.logodds_max", self.logodds_max,
                  "above occupancy.occupied_above")
-        _require(1 <= self.pixel_stride <= 64, "occupancy.pixel_stride", self.pixel_stride, "in [1, 64]")
-        _require(self.grow_chunk_m >= self.cell_m, "occupancy.grow_chunk_m", self.grow_chunk_m, ">= occupancy.cell_m")
+        check_config(1 <= self.pixel_stride <= 64, "occupancy.pixel_stride", self.pixel_stride, "in [1, 64]")
+        check_config(self.grow_chunk_m >= self.cell_m, "occupancy.grow_chunk_m", self.grow_chunk_m, ">= occupancy.cell_m")
 
 
 @dataclass(frozen=True, slots=True)

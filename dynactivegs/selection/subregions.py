@@ -27,12 +27,9 @@ from scipy.cluster.hierarchy import fcluster, linkage
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial.distance import squareform
 
-from dynactivegs.errors import ConfigError
+from dynactivegs.errors import check_config
+from dynactivegs.selection.voronoi import graph_arrays
 
-
-def _require(cond: bool, name: str, value: object, allowed: str) -> None:
-    if not cond:
-        raise ConfigError(f"bad config value {name}={value!r}: must be {allowed}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,10 +49,10 @@ class SubregionConfig:
 
     def __post_init__(self) -> None:
         for name in ("l_e", "l_p", "l_m"):
-            _require(getattr(self, name) >= 0.0, f"subregions.{name}", getattr(self, name), ">= 0")
-        _require(self.l_e + self.l_p > 0.0, "subregions.l_e", self.l_e, "positive where subregions.l_p is 0")
-        _require(self.method in ("average", "complete"), "subregions.method", self.method, "'average' or 'complete'")
-        _require(self.cut_distance > 0.0, "subregions.cut_distance", self.cut_distance, "> 0")
+            check_config(getattr(self, name) >= 0.0, f"subregions.{name}", getattr(self, name), ">= 0")
+        check_config(self.l_e + self.l_p > 0.0, "subregions.l_e", self.l_e, "positive where subregions.l_p is 0")
+        check_config(self.method in ("average", "complete"), "subregions.method", self.method, "'average' or 'complete'")
+        check_config(self.cut_distance > 0.0, "subregions.cut_distance", self.cut_distance, "> 0")
 
 
 @dataclass(frozen=True, slots=True)
@@ -83,17 +80,6 @@ class Subregions:
         return self.region_of(robot_node)
 
 
-def _edge_arrays(G: nx.Graph, um_attr: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    n = G.number_of_nodes()
-    assert set(G.nodes) == set(range(n)), "graph nodes must be 0..N-1"
-    edges = sorted((min(a, b), max(a, b)) for a, b in G.edges)
-    u = np.array([e[0] for e in edges], np.int64)
-    v = np.array([e[1] for e in edges], np.int64)
-    length = np.array([G.edges[e]["length_m"] for e in edges], np.float64)
-    um = np.array([G.edges[e].get(um_attr, 0.0) for e in edges], np.float64)
-    return u, v, length, um
-
-
 def dyn_distance_terms(G: nx.Graph, um_attr: str = "um_mean") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The three (N, N) float64 terms of eq. (6): d_E, d_P (inf across components), d_M (inf likewise).
 
@@ -105,7 +91,9 @@ def dyn_distance_terms(G: nx.Graph, um_attr: str = "um_mean") -> tuple[np.ndarra
     n = G.number_of_nodes()
     xy = np.stack([np.asarray(G.nodes[i]["xy"], np.float64) for i in range(n)]) if n else np.zeros((0, 2))
     d_e = np.linalg.norm(xy[:, None] - xy[None], axis=2)
-    u, v, length, um = _edge_arrays(G, um_attr)
+    arrays = graph_arrays(G)
+    u, v, length = arrays.u, arrays.v, arrays.length_m
+    um = np.array([G.edges[a, b].get(um_attr, 0.0) for a, b in zip(u, v)], np.float64)
     assert np.all(length > 0), "edge lengths must be positive"
     m = sparse.csr_matrix((np.r_[length, length], (np.r_[u, v], np.r_[v, u])), shape=(n, n))
     d_p, pred = dijkstra(m, directed=False, return_predecessors=True)

@@ -36,7 +36,6 @@ Grid convention as in :mod:`dynactivegs.selection.occupancy`.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import networkx as nx
@@ -45,14 +44,10 @@ from scipy import ndimage, sparse
 from scipy.spatial import cKDTree
 from skimage.morphology import skeletonize
 
-from dynactivegs.errors import ConfigError
+from dynactivegs.errors import check_config
 
 _EIGHT = np.ones((3, 3), bool)
 
-
-def _require(cond: bool, name: str, value: object, allowed: str) -> None:
-    if not cond:
-        raise ConfigError(f"bad config value {name}={value!r}: must be {allowed}")
 
 
 @dataclass(frozen=True, slots=True)
@@ -77,12 +72,12 @@ class VoronoiConfig:
     """Connected components of the graph whose total edge length is below this are dropped (specks)."""
 
     def __post_init__(self) -> None:
-        _require(0.0 <= self.robot_radius_m <= 2.0, "voronoi.robot_radius_m", self.robot_radius_m, "in [0, 2] m")
-        _require(self.node_spacing_m > 0.0, "voronoi.node_spacing_m", self.node_spacing_m, "> 0 m")
-        _require(self.min_spur_m >= 0.0, "voronoi.min_spur_m", self.min_spur_m, ">= 0 m")
-        _require(self.frontier_dist_m >= 0.0, "voronoi.frontier_dist_m", self.frontier_dist_m, ">= 0 m")
-        _require(self.min_frontier_m >= 0.0, "voronoi.min_frontier_m", self.min_frontier_m, ">= 0 m")
-        _require(self.min_component_m >= 0.0, "voronoi.min_component_m", self.min_component_m, ">= 0 m")
+        check_config(0.0 <= self.robot_radius_m <= 2.0, "voronoi.robot_radius_m", self.robot_radius_m, "in [0, 2] m")
+        check_config(self.node_spacing_m > 0.0, "voronoi.node_spacing_m", self.node_spacing_m, "> 0 m")
+        check_config(self.min_spur_m >= 0.0, "voronoi.min_spur_m", self.min_spur_m, ">= 0 m")
+        check_config(self.frontier_dist_m >= 0.0, "voronoi.frontier_dist_m", self.frontier_dist_m, ">= 0 m")
+        check_config(self.min_frontier_m >= 0.0, "voronoi.min_frontier_m", self.min_frontier_m, ">= 0 m")
+        check_config(self.min_component_m >= 0.0, "voronoi.min_component_m", self.min_component_m, ">= 0 m")
 
 
 def clearance_m(free: np.ndarray, cell_m: float) -> np.ndarray:
@@ -389,3 +384,41 @@ def nearest_node(G: nx.Graph, xy_m: np.ndarray) -> int:
         return -1
     _, i = cKDTree(pts).query(np.asarray(xy_m, np.float64))
     return int(i)
+
+
+@dataclass(frozen=True, slots=True)
+class GraphArrays:
+    """A graph's edges as arrays, in a fixed order (sorted by ``(u, v)``, ``u < v``)."""
+
+    n_nodes: int
+    u: np.ndarray                 # int64 (E,) lower node id
+    v: np.ndarray                 # int64 (E,) higher node id
+    length_m: np.ndarray          # float64 (E,) polyline length
+    cell_start: np.ndarray        # int64 (E + 1,) edge e's cells are cells[cell_start[e]:cell_start[e + 1]]
+    cells: np.ndarray             # int64 (C, 2) (row, col) chains from u to v, concatenated
+
+    def __post_init__(self) -> None:
+        e = self.u.shape[0]
+        assert self.v.shape == (e,) and self.length_m.shape == (e,) and self.cell_start.shape == (e + 1,)
+        assert self.cells.ndim == 2 and self.cells.shape[1] == 2 and self.cell_start[-1] == len(self.cells)
+        for a in (self.u, self.v, self.length_m, self.cell_start, self.cells):
+            a.flags.writeable = False
+
+    @property
+    def n_edges(self) -> int:
+        return int(self.u.shape[0])
+
+
+def graph_arrays(G: nx.Graph) -> GraphArrays:
+    """The edge arrays of ``G`` (nodes must be ``0..N-1``; edges need ``length_m``, and ``cells`` if line integrals are used)."""
+    n = G.number_of_nodes()
+    assert set(G.nodes) == set(range(n)), "graph nodes must be 0..N-1"
+    edges = sorted((min(a, b), max(a, b)) for a, b in G.edges)
+    u = np.array([e[0] for e in edges], np.int64)
+    v = np.array([e[1] for e in edges], np.int64)
+    length = np.array([G.edges[e]["length_m"] for e in edges], np.float64)
+    chains = [np.asarray(G.edges[e].get("cells", np.zeros((0, 2), np.int64)), np.int64).reshape(-1, 2) for e in edges]
+    counts = np.array([len(c) for c in chains], np.int64)
+    start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    cells = np.concatenate(chains) if chains else np.zeros((0, 2), np.int64)
+    return GraphArrays(n, u, v, length, start, cells)
