@@ -150,7 +150,7 @@ class DinoFeatures:
         try:
             import transformers
         except ImportError as e:
-            raise DagsError("the dinov2 feature backend needs the transformers package: pip install transformers") from e
+            raise DagsError("the dinov2 feature backend needs transformers: pip install -e \".[dino]\"") from e
         try:
             self.model = transformers.AutoModel.from_pretrained(str(path), local_files_only=True).eval()
         except Exception as e:  # a corrupt or foreign checkpoint
