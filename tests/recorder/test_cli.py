@@ -34,3 +34,28 @@ def test_dagsrun_bad_input_is_one_line_exit_2(tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert rc == 2, argv
         assert len(err.splitlines()) == 1 and phrase in err and err.startswith("dagsrun: error:"), err
+
+
+def test_every_console_script_resolves_to_a_callable():
+    import importlib
+    import re
+    from pathlib import Path
+
+    text = (Path(__file__).parents[2] / "pyproject.toml").read_text()
+    section = text.split("[project.scripts]", 1)[1].split("\n[", 1)[0]
+    scripts = dict(re.findall(r'^(\S+) = "([^"]+)"', section, flags=re.M))
+    assert {"dagsrun", "dagsreplay"} <= set(scripts)
+    for name, target in scripts.items():
+        module, func = target.split(":")
+        assert callable(getattr(importlib.import_module(module), func)), name
+
+
+def test_core_package_does_not_import_mcap_rerun_recorder_or_replay():
+    import subprocess
+    import sys
+
+    code = ("import sys, dynactivegs, dynactivegs.sim.world, dynactivegs.splat.render, dynactivegs.perception.uncertainty, "
+            "dynactivegs.selection.voronoi, dynactivegs.planning.paths; "
+            "print(sorted(m for m in sys.modules if m.split('.')[0] in ('mcap', 'rerun', 'recorder', 'replay')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    assert out == "[]", out
