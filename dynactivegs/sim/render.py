@@ -111,9 +111,10 @@ def _embree_scene(triangles: np.ndarray) -> rtcs.EmbreeScene:
 
 
 def _cast(scene: rtcs.EmbreeScene, origin: np.ndarray, dirs: np.ndarray):
-    """Closest hits: (t (N,) float64 with inf on miss, face (N,) int64 with -1 on miss, bary (N, 2))."""
+    """Closest hits of rays from ``origin`` (3,) or per-ray origins (N, 3) along ``dirs`` (N, 3):
+    (t (N,) float64 with inf on miss, face (N,) int64 with -1 on miss, bary (N, 2))."""
     n = len(dirs)
-    origins = np.broadcast_to(origin.astype(np.float32), (n, 3))
+    origins = np.broadcast_to(np.asarray(origin, dtype=np.float32), (n, 3))
     res = scene.run(np.ascontiguousarray(origins), np.ascontiguousarray(dirs, dtype=np.float32), output=1)
     face = res["primID"].astype(np.int64)
     hit = face >= 0
@@ -138,13 +139,7 @@ class Renderer:
 
     def cast(self, origins_m: np.ndarray, dirs: np.ndarray):
         """Closest static hits of arbitrary rays; returns (t, face, bary) as in a render. ``origins_m`` (N, 3) or (3,)."""
-        if origins_m.ndim == 1:
-            return _cast(self._bvh, origins_m, dirs)
-        res = self._bvh.run(np.ascontiguousarray(origins_m, dtype=np.float32),
-                            np.ascontiguousarray(dirs, dtype=np.float32), output=1)
-        face = res["primID"].astype(np.int64)
-        t = np.where(face >= 0, res["tfar"].astype(np.float64), np.inf)
-        return t, np.where(face >= 0, face, -1), np.stack([res["u"], res["v"]], axis=1).astype(np.float64)
+        return _cast(self._bvh, origins_m, dirs)
 
     def render(self, T_world_cam: np.ndarray, K: np.ndarray, width: int, height: int, *,
                people: PeopleMesh | None = None, min_depth_m: float = 0.1, max_depth_m: float = 10.0) -> RenderResult:

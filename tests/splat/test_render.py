@@ -92,25 +92,14 @@ def test_float32_fast_matches_reference_to_1e4():
     assert (ref.depth - fast.depth).abs().max() <= 1e-4 * ref.depth.abs().max()
 
 
-def test_reference_matches_finite_differences():
-    """torch.autograd.gradcheck (float64 central differences) of the reference on a tiny scene."""
-    gen = torch.Generator().manual_seed(5)
-    g, K, T = random_scene(6, 20, 14, gen, adversarial=False)
+@pytest.mark.parametrize("backend,seed,n,w,h", [("reference", 5, 6, 20, 14), ("cpu", 6, 8, 24, 18)])
+def test_backend_matches_finite_differences(backend, seed, n, w, h):
+    """torch.autograd.gradcheck (float64 central differences) of a backend on a tiny scene."""
+    gen = torch.Generator().manual_seed(seed)
+    g, K, T = random_scene(n, w, h, gen, adversarial=False)
 
     def f(*params):
-        out = render(Gaussians(*params), K, T, 20, 14, (0.2, 0.3, 0.4), backend="reference")
-        return out.rgb, out.depth, out.alpha
-
-    params = [t.detach().requires_grad_() for t in g.tensors()]
-    assert torch.autograd.gradcheck(f, params, eps=1e-6, atol=1e-5, rtol=1e-4)
-
-
-def test_fast_backend_matches_finite_differences():
-    gen = torch.Generator().manual_seed(6)
-    g, K, T = random_scene(8, 24, 18, gen, adversarial=False)
-
-    def f(*params):
-        out = render(Gaussians(*params), K, T, 24, 18, (0.2, 0.3, 0.4), backend="cpu")
+        out = render(Gaussians(*params), K, T, w, h, (0.2, 0.3, 0.4), backend=backend)
         return out.rgb, out.depth, out.alpha
 
     params = [t.detach().requires_grad_() for t in g.tensors()]
