@@ -79,3 +79,58 @@ def dyn_distance_terms_reference(G, um_attr: str = "um_mean") -> tuple[np.ndarra
                 d_p[i, j] = sum(G.edges[a, b]["length_m"] for a, b in zip(p[:-1], p[1:]))
                 d_m[i, j] = sum(G.edges[a, b]["length_m"] * G.edges[a, b].get(um_attr, 0.0) for a, b in zip(p[:-1], p[1:]))
     return d_e, d_p, d_m
+
+
+def view_gain_reference(cfg, occ: np.ndarray, u_s: np.ndarray, u_m: np.ndarray, origin_m: np.ndarray, voxel_m: float,
+                        xy_m: tuple[float, float], yaw_rad: float) -> tuple[float, float]:
+    """Reference of :mod:`dynactivegs.selection.visibility` for one candidate view: (I_s, R_m) of eqs. (8)-(9).
+
+    Loops over every voxel of the grid: first every occluder (its bounding-sphere footprint
+    in panorama bins, nearest distance kept), then every query voxel (in range, in the
+    vertical field of view, azimuth bin centre within hfov / 2 of ``yaw_rad``).
+    """
+    X, Y, Z = occ.shape
+    n_az, n_el = cfg.n_azimuth_bins, cfg.n_elevation_bins
+    hv = 0.5 * math.radians(cfg.vfov_deg)
+    daz, de = 2 * math.pi / n_az, 2 * hv / n_el
+    cam = (float(xy_m[0]), float(xy_m[1]), cfg.camera_height_m)
+    centre = lambda i, j, k: tuple(float(origin_m[a]) + (idx + 0.5) * voxel_m for a, idx in enumerate((i, j, k)))
+    zbuf = {}
+    for i in range(X):
+        for j in range(Y):
+            for k in range(Z):
+                if not occ[i, j, k]:
+                    continue
+                d = [c - p for c, p in zip(centre(i, j, k), cam)]
+                rh = math.sqrt(d[0] ** 2 + d[1] ** 2)
+                r = math.sqrt(rh ** 2 + d[2] ** 2)
+                if r > cfg.range_m or r <= 0:
+                    continue
+                ha = math.atan(0.5 * math.sqrt(3) * voxel_m / r)
+                az, el = math.atan2(d[1], d[0]), math.atan2(d[2], rh)
+                a_lo, a_hi = math.floor((az - ha + math.pi) / daz), math.floor((az + ha + math.pi) / daz)
+                bins_a = range(n_az) if a_hi - a_lo >= n_az else [a % n_az for a in range(a_lo, a_hi + 1)]
+                for a in bins_a:
+                    for e in range(n_el):
+                        if math.floor((el - ha + hv) / de) <= e <= math.floor((el + ha + hv) / de):
+                            zbuf[(a, e)] = min(zbuf.get((a, e), math.inf), r)
+    gain = risk = 0.0
+    for i in range(X):
+        for j in range(Y):
+            for k in range(Z):
+                d = [c - p for c, p in zip(centre(i, j, k), cam)]
+                rh = math.sqrt(d[0] ** 2 + d[1] ** 2)
+                r = math.sqrt(rh ** 2 + d[2] ** 2)
+                el = math.atan2(d[2], rh)
+                if r > cfg.range_m or abs(el) > hv:
+                    continue
+                a = math.floor((math.atan2(d[1], d[0]) + math.pi) / daz) % n_az
+                bin_centre = -math.pi + (a + 0.5) * daz
+                if abs((bin_centre - yaw_rad + math.pi) % (2 * math.pi) - math.pi) >= 0.5 * math.radians(cfg.hfov_deg) + 1e-9:
+                    continue
+                e = min(math.floor((el + hv) / de), n_el - 1)
+                z = zbuf.get((a, e), math.inf)
+                vis = 1.0 if z == math.inf else 1.0 / (1.0 + math.exp(-(z - r + cfg.margin_m) / cfg.softness_m))
+                gain += vis * float(u_s[i, j, k]) * voxel_m ** 3
+                risk += vis * float(u_m[i, j, k]) * voxel_m ** 3
+    return gain, risk
