@@ -1,0 +1,256 @@
+"""The planning stage: ``step(cfg, rec, state, rng) -> (state, PlanningOut)`` (DESIGN.md §3, §5 Planning).
+
+Per step:
+
+1. U_m of ``rec.fields`` is projected to the floor (:mod:`dynactivegs.fields.project`) and
+   folded into a per-cell temporal average kept in the state, eq. (13)
+   ``U_m(t) = (1 - gamma) U_m(t-1) + gamma U_m now``. The average lives on the floor map,
+   not on edges, so it survives graph rebuilds; averaging along an edge is linear, so the
+   edge mean of the averaged map is the eq. (13) average of the edge means.
+2. Edge costs on the selection's graph, eq. (11) ``c(e) = len(e) + l_m * mean U_m along e``
+   with the mean over the straight segment between the edge's nodes (``SelectionOut`` carries
+   node positions and lengths, not the cell chains), by planner variant: ``shortest``
+   (length only), ``dyn_edge`` (current U_m), ``dyn_edge_temporal`` (the eq. 13 average).
+   Edges passing within ``block_radius_m`` of a place where the robot was recently blocked
+   cost ``block_penalty_m`` more.
+3. The path is re-planned (Dijkstra from the node nearest the robot to the target node,
+   then the target position) when the target or graph changed, the robot was blocked, or
+   ``replan_every`` steps passed; otherwise the robot keeps following the stored path.
+4. The next discrete action (:func:`dynactivegs.planning.actions.next_action`): turn toward
+   the next waypoint, forward when aligned, final turn to the target yaw, STOP at the target.
+5. Local collision check: a forward move that the current depth frame says would hit
+   something (:func:`~dynactivegs.planning.actions.forward_blocked`), or a forward move at
+   the previous step that did not move the robot (a bump), blocks: the spot is penalised,
+   the path is re-planned at once, and if the next move is still a blocked forward move the
+   robot waits (STOP) for the way to clear.
+
+No dead-locks: ``PlanningOut.stuck`` reports the robot has not left a small disc for
+``actions.stuck_steps`` steps with an unreached target; the selection stage applies the
+same rule to its own pose history (it cannot read planning) and picks another target.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dynactivegs.errors import check_config
+from dynactivegs.fields.project import FloorMap, motion_floor_map, segment_means
+from dynactivegs.planning.actions import ActionConfig, StuckState, forward_blocked, is_stuck, next_action, update_stuck
+from dynactivegs.planning.paths import PathConfig, ema_update, shortest_path, variant_edge_cost
+from dynactivegs.records import PlanningOut, SelectionOut, StepRecord, robot_pose_of
+from dynactivegs.selection.voronoi import GraphArrays
+from dynactivegs.sim.robot import Action
+
+
+@dataclass(frozen=True, slots=True)
+class PlanningConfig:
+    """Planner variant and weights (eqs. 11, 13), path following, collision check and replanning."""
+
+    path: PathConfig = field(default_factory=PathConfig)
+    """Planner variant (shortest | dyn_edge | dyn_edge_temporal, the paper's Table 5), l_m of eq. (11), gamma of eq. (13)."""
+    actions: ActionConfig = field(default_factory=ActionConfig)
+    """Robot geometry and step sizes (defaults match the simulator's RobotConfig), stuck rule."""
+    um_band_lo_m: float = 0.1
+    """U_m is projected to the floor from voxels between this height ..."""
+    um_band_hi_m: float = 1.9
+    """... and this height (where people are)."""
+    sample_spacing_m: float = 0.1
+    """Spacing of the samples of U_m along an edge."""
+    replan_every: int = 5
+    """With nothing else changed, the path is re-planned every this many steps (U_m moves on)."""
+    block_penalty_m: float = 20.0
+    """Extra cost of an edge near a place where the robot was recently blocked."""
+    block_radius_m: float = 0.4
+    """Edges passing within this distance of a blocked spot get the penalty."""
+    block_hold_steps: int = 15
+    """A blocked spot is remembered for this many steps."""
+    bump_tol_m: float = 0.05
+    """A forward action after which the robot moved less than this was blocked (a bump)."""
+
+    def __post_init__(self) -> None:
+        check_config(self.um_band_lo_m < self.um_band_hi_m, "planning.um_band_lo_m", self.um_band_lo_m,
+                     "below planning.um_band_hi_m")
+        check_config(self.sample_spacing_m > 0.0, "planning.sample_spacing_m", self.sample_spacing_m, "> 0 m")
+        check_config(self.replan_every >= 1, "planning.replan_every", self.replan_every, ">= 1")
+        check_config(self.block_penalty_m >= 0.0, "planning.block_penalty_m", self.block_penalty_m, ">= 0")
+        check_config(self.block_radius_m >= 0.0, "planning.block_radius_m", self.block_radius_m, ">= 0 m")
+        check_config(self.block_hold_steps >= 0, "planning.block_hold_steps", self.block_hold_steps, ">= 0")
+        check_config(0.0 < self.bump_tol_m < self.actions.forward_step_m, "planning.bump_tol_m", self.bump_tol_m,
+                     "in (0, actions.forward_step_m)")
+
+
+@dataclass(frozen=True, slots=True)
+class PlanningState:
+    """Everything planning keeps between steps."""
+
+    ema_origin_ij: tuple[int, int]       # integer floor-cell offset of the EMA map's cell (0, 0)
+    ema: np.ndarray                      # float64 (X, Y) eq. (13) average of the floor U_m
+    graph_key: bytes                     # digest of the graph the path was planned on
+    target_key: tuple[float, float, float] | None
+    path_xy_m: np.ndarray                # float64 (P, 2) waypoints (the last is the target position)
+    path_cost: float
+    next_waypoint: int                   # index of the first waypoint not yet reached
+    planned_step: int
+    blocks: tuple[tuple[float, float, int], ...]   # (x, y, remembered until this step)
+    last_xy_m: tuple[float, float] | None
+    last_action: int
+    stuck: StuckState
+
+    def __post_init__(self) -> None:
+        self.ema.flags.writeable = False
+        self.path_xy_m.flags.writeable = False
+
+
+def init_state(cfg: PlanningConfig) -> PlanningState:
+    """Step 0's state: no map average, no path."""
+    assert isinstance(cfg, PlanningConfig)
+    return PlanningState((0, 0), np.zeros((0, 0)), b"", None, np.zeros((0, 2)), math.nan, 0, -1, (), None,
+                         int(Action.STOP), StuckState())
+
+
+def _graph_key(sel: SelectionOut) -> bytes:
+    h = hashlib.blake2b(digest_size=16)
+    for a in (sel.node_xy_m, sel.edges, sel.edge_length_m):
+        h.update(np.ascontiguousarray(a).tobytes())
+        h.update(str(a.shape).encode())
+    return h.digest()
+
+
+def _ema_map(cfg: PlanningConfig, state: PlanningState, now: FloorMap) -> tuple[tuple[int, int], np.ndarray, FloorMap]:
+    """Eq. (13) on the floor map: the state's average grown to the current map and updated with it."""
+    o_new = tuple(int(v) for v in np.round(now.origin_xy_m / now.cell_m))
+    X, Y = now.values.shape
+    old = np.zeros((X, Y))
+    if state.ema.size:
+        di, dj = state.ema_origin_ij[0] - o_new[0], state.ema_origin_ij[1] - o_new[1]
+        assert di >= 0 and dj >= 0, "the fields grid only grows"
+        h, w = state.ema.shape
+        old[di:di + h, dj:dj + w] = state.ema
+    ema = ema_update(old, now.values, cfg.path.ema_gamma)
+    return o_new, ema, FloorMap(now.origin_xy_m.copy(), now.cell_m, ema)
+
+
+def _segment_point_dist(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    ab = b - a
+    t = np.clip(((p - a) * ab).sum(axis=1) / np.maximum((ab * ab).sum(axis=1), 1e-12), 0.0, 1.0)
+    return np.hypot(*(a + t[:, None] * ab - p).T)
+
+
+def _block_ahead(blocks, robot_xy: np.ndarray, fwd: np.ndarray, acfg: ActionConfig) -> bool:
+    """Whether a remembered blocked spot lies in the rectangle one forward step sweeps (as in forward_blocked)."""
+    for x, y, _ in blocks:
+        rel = np.array([x, y]) - robot_xy
+        ahead = float(rel @ fwd)
+        side = float(rel[0] * -fwd[1] + rel[1] * fwd[0])
+        if 0.0 < ahead <= acfg.forward_step_m + acfg.radius_m + 1e-9 and abs(side) <= acfg.radius_m:
+            return True
+    return False
+
+
+def _plan(cfg: PlanningConfig, sel: SelectionOut, now_map: FloorMap | None, ema_map: FloorMap | None,
+          blocks, robot_xy: np.ndarray) -> tuple[np.ndarray, float]:
+    """Waypoints (P, 2) from the robot to the target and the path's eq. (11) cost; (empty, nan) without a path."""
+    n = len(sel.node_xy_m)
+    if n == 0 or sel.target_node < 0:
+        return np.zeros((0, 2)), math.nan
+    u = sel.edges[:, 0].astype(np.int64)
+    v = sel.edges[:, 1].astype(np.int64)
+    arrays = GraphArrays(n, u, v, sel.edge_length_m.astype(np.float64), np.zeros(len(u) + 1, np.int64),
+                         np.zeros((0, 2), np.int64))
+    a, b = sel.node_xy_m[u], sel.node_xy_m[v]
+    zero = np.zeros(len(u))
+    um_now = segment_means(now_map, a, b, cfg.sample_spacing_m) if now_map is not None and len(u) else zero
+    um_ema = segment_means(ema_map, a, b, cfg.sample_spacing_m) if ema_map is not None and len(u) else zero
+    cost = variant_edge_cost(cfg.path, arrays.length_m, um_now, um_ema)          # eq. (11)
+    for x, y, _ in blocks:
+        if len(u):
+            near = _segment_point_dist(np.array([x, y]), a, b) <= cfg.block_radius_m
+            cost = cost + np.where(near, cfg.block_penalty_m, 0.0)
+    d = np.hypot(*(sel.node_xy_m - robot_xy).T)
+    source = int(np.argmin(d))
+    nodes, total = shortest_path(arrays, np.maximum(cost, 1e-9), source, int(sel.target_node))
+    if not nodes:
+        return np.zeros((0, 2)), math.nan
+    wp = sel.node_xy_m[nodes]
+    # start from the second node when the robot is already between the first two
+    if len(wp) >= 2 and np.hypot(*(robot_xy - wp[1])) <= np.hypot(*(wp[0] - wp[1])):
+        wp = wp[1:]
+    if np.hypot(*(wp[-1] - sel.target_xy_m)) > 1e-6:
+        wp = np.concatenate([wp, sel.target_xy_m[None]])
+    return wp.astype(np.float64), float(total)
+
+
+def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
+         rng: np.random.Generator) -> tuple[PlanningState, PlanningOut]:
+    """Plan (or keep following) a path to the selected target and return the next discrete action.
+
+    Reads ``rec.frame`` (T_world_cam for the robot's pose, depth_m and K for the collision
+    check, step), ``rec.fields.u_m`` and ``rec.selection`` (graph, target). Deterministic;
+    ``rng`` is not used.
+    """
+    assert rec.selection is not None and rec.fields is not None, "planning runs after fields and selection"
+    state = init_state(cfg) if state is None else state
+    f, sel = rec.frame, rec.selection
+    now = int(f.step)
+    pose = robot_pose_of(f)
+    robot_xy = np.array([pose.x_m, pose.y_m])
+    acfg = cfg.actions
+
+    has_grid = 0 not in rec.fields.u_m.shape
+    now_map = motion_floor_map(rec.fields, cfg.um_band_lo_m, cfg.um_band_hi_m) if has_grid else None
+    if now_map is not None:
+        ema_origin, ema, ema_map = _ema_map(cfg, state, now_map)
+    else:
+        ema_origin, ema, ema_map = state.ema_origin_ij, state.ema, None
+
+    blocks = tuple(b for b in state.blocks if b[2] > now)
+    bumped = (state.last_action == int(Action.FORWARD) and state.last_xy_m is not None
+              and math.hypot(robot_xy[0] - state.last_xy_m[0], robot_xy[1] - state.last_xy_m[1]) < cfg.bump_tol_m)
+    fwd = np.array([math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)])
+    ahead = robot_xy + fwd * (acfg.forward_step_m + acfg.radius_m)
+    if bumped:
+        blocks = blocks + ((float(ahead[0]), float(ahead[1]), now + cfg.block_hold_steps),)
+
+    target_key = (float(sel.target_xy_m[0]), float(sel.target_xy_m[1]), float(sel.target_yaw_rad))
+    gkey = _graph_key(sel)
+    new_target = target_key != state.target_key
+    stuck_state = StuckState() if new_target else state.stuck
+    stuck_state = update_stuck(stuck_state, robot_xy[0], robot_xy[1], acfg)
+
+    path, cost, k, planned_step = state.path_xy_m, state.path_cost, state.next_waypoint, state.planned_step
+    replanned = False
+    if sel.mode == "none" or sel.target_node < 0:
+        action, path, cost, k, blocked = Action.TURN_LEFT, np.zeros((0, 2)), math.nan, 0, False   # look around
+    else:
+        if (new_target or gkey != state.graph_key or bumped or len(path) == 0
+                or now - planned_step >= cfg.replan_every):
+            path, cost = _plan(cfg, sel, now_map, ema_map, blocks, robot_xy)
+            k, planned_step, replanned = 0, now, True
+        ps = next_action(pose, path[k:], sel.target_yaw_rad, acfg)
+        action, k = ps.action, k + ps.next_waypoint
+        blocked = False
+        if action == Action.FORWARD and (_block_ahead(blocks, robot_xy, fwd, acfg)
+                                         or forward_blocked(f.depth_m, f.K, f.T_world_cam, acfg)):
+            blocked = True
+            blocks = blocks + ((float(ahead[0]), float(ahead[1]), now + cfg.block_hold_steps),)
+            path, cost = _plan(cfg, sel, now_map, ema_map, blocks, robot_xy)
+            k, planned_step, replanned = 0, now, True
+            ps = next_action(pose, path, sel.target_yaw_rad, acfg)
+            action, k = ps.action, ps.next_waypoint
+            if action == Action.FORWARD:
+                action = Action.STOP                       # the way is still blocked: wait for it to clear
+        if len(path) == 0:
+            action = Action.TURN_LEFT                      # no path to the target: look around
+
+    reached = action == Action.STOP and not blocked
+    stuck = is_stuck(stuck_state, acfg) and not reached
+    new_state = PlanningState(ema_origin, ema, gkey, target_key, np.asarray(path, np.float64), float(cost), int(k),
+                              int(planned_step), blocks, (float(robot_xy[0]), float(robot_xy[1])), int(action),
+                              stuck_state)
+    out = PlanningOut(action=int(action), path_xy_m=np.concatenate([robot_xy[None], path[k:]]) if len(path) else
+                      np.zeros((0, 2)), path_cost=float(cost), replanned=replanned, blocked=blocked, stuck=stuck)
+    return new_state, out

@@ -1,0 +1,487 @@
+"""The selection stage: ``step(cfg, rec, state, rng) -> (state, SelectionOut)`` (DESIGN.md §3, §5 Selection).
+
+Per step:
+
+1. The 2D occupancy grid integrates frame t (returns on pixels with beta above
+   ``occupancy.beta_max`` clear space but never become obstacles).
+2. The Voronoi graph of the known free space is rebuilt every ``rebuild_every`` steps, or
+   at once when the robot is farther than ``rebuild_moved_m`` from every node (amortised:
+   building costs tens of milliseconds in a house). Subregions (eq. 6) are clustered on each
+   new graph with d_M from U_m projected to the floor (:mod:`dynactivegs.fields.project`).
+3. The current target is kept (mode ``keep``) until it is *reached* (robot within
+   ``reach_tol_m`` and ``reach_yaw_deg`` of it), *unreachable* (no graph path, or no node
+   within ``target_snap_m`` of it any more), the robot is *stuck*, or it *timed out*.
+4. Otherwise a new target is chosen by the configured variant:
+
+   - ``full``: eq. (7) ``S_local = I_s - l_r R_m - l_c C`` with the travel cost C the eq. (11)
+     cost ``len + motion_weight * mean U_m`` from the robot; the best view in the robot's
+     subregion if its score exceeds ``local_threshold``, else the best view in the subregion
+     with the best eq. (10) ``S_global(R_k) = sum_n max_yaw (I_s - l_r R_m) - l_d d(R_l, R_k)
+     - l_v P_visit(R_k)``.
+   - ``gain_cost``: ``S = I_s - l_c C`` with C the path length; ``static_gain``: ``S = I_s``;
+     both take the best view anywhere (no motion term anywhere, the paper's Table 4).
+   - ``random``: a random reachable node and heading (from ``rng``).
+   - ``frontier``: the nearest reachable frontier node by path length (classic frontier
+     exploration), facing along the last path edge; mode ``none`` when no frontier is left.
+
+Stuck detection. Selection runs before planning in a step and reads nothing of planning,
+so it detects the lack of progress itself: the robot has not left a disc of
+``stuck_move_tol_m`` for ``stuck_steps`` steps while it had an unreached target (e.g. a
+person stands in a doorway). The planner's ``PlanningOut.stuck`` applies the same rule to
+report it; with equal parameters the two agree. A target given up as stuck, unreachable or
+timed out (and, for ``frontier`` and ``random``, one reached) is banned for ``ban_steps``.
+
+Visit counts (eq. 10): the robot's positions of all past steps are kept in the state;
+``P_visit(R_k)`` is the mean over R_k's nodes of the number of past positions within
+``visit_radius_m`` of the node, divided by ``visit_norm_steps``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal, get_args
+
+import networkx as nx
+import numpy as np
+from scipy.spatial import cKDTree
+
+from dynactivegs.errors import check_config
+from dynactivegs.fields.project import FloorMap, motion_floor_map
+from dynactivegs.planning.paths import dijkstra, edge_cost
+from dynactivegs.records import FieldsOut, SelectionOut, StepRecord, robot_pose_of
+from dynactivegs.selection.occupancy import OccupancyConfig, OccupancyGrid, update_occupancy
+from dynactivegs.selection.subregions import SubregionConfig, Subregions, cluster_subregions
+from dynactivegs.selection.visibility import VisibilityConfig, bin_gains, occluder_grid, view_gains
+from dynactivegs.selection.voronoi import GraphArrays, VoronoiConfig, graph_arrays, graph_from_occupancy, node_xy
+from dynactivegs.sim.robot import wrap_angle
+
+SelectionVariant = Literal["random", "static_gain", "gain_cost", "full", "frontier"]
+SELECTION_VARIANTS: tuple[str, ...] = get_args(SelectionVariant)
+
+
+@dataclass(frozen=True, slots=True)
+class SelectionConfig:
+    """Occupancy, graph, subregions, view scoring (eqs. 7-10) and the target-keeping rules."""
+
+    variant: SelectionVariant = "full"
+    """random | static_gain | gain_cost | full (the paper's Table 4), or frontier (nearest-frontier baseline)."""
+    occupancy: OccupancyConfig = field(default_factory=OccupancyConfig)
+    voronoi: VoronoiConfig = field(default_factory=lambda: VoronoiConfig(node_spacing_m=0.5))
+    """The graph; nodes every 0.5 m so that the straight segments the planner follows stay near the skeleton."""
+    subregions: SubregionConfig = field(default_factory=SubregionConfig)
+    visibility: VisibilityConfig = field(default_factory=VisibilityConfig)
+    l_r: float = 1.0
+    """lambda_r of eqs. (7) and (10): weight of the motion risk R_m against the gain I_s (full only)."""
+    l_c: float = 1.0
+    """lambda_c of eq. (7): weight of the travel cost C (gain per metre of path)."""
+    motion_weight: float = 4.0
+    """l_m of the eq. (11) travel cost used by full: metres of detour worth one unit of mean U_m along an edge."""
+    local_threshold: float = 4.0
+    """full: the best view in the robot's subregion is taken while its S_local exceeds this (uncertainty x m^3)."""
+    l_d: float = 2.0
+    """lambda_d of eq. (10): weight of the path length from the robot to a subregion (per metre)."""
+    l_v: float = 5.0
+    """lambda_v of eq. (10): weight of the visit penalty P_visit."""
+    visit_radius_m: float = 1.0
+    """Past robot positions within this distance of a node count as visits of it."""
+    visit_norm_steps: float = 10.0
+    """P_visit is the mean visit count of a subregion's nodes divided by this."""
+    um_band_lo_m: float = 0.1
+    """U_m is projected to the floor from voxels between this height ..."""
+    um_band_hi_m: float = 1.9
+    """... and this height (where people are)."""
+    rebuild_every: int = 5
+    """The Voronoi graph is rebuilt every this many steps."""
+    rebuild_moved_m: float = 1.0
+    """... or at once when the robot is farther than this from every node."""
+    reach_tol_m: float = 0.3
+    """A target is reached when the robot is within this distance ..."""
+    reach_yaw_deg: float = 10.0
+    """... and within this heading of it."""
+    target_snap_m: float = 0.6
+    """A kept target follows the nearest node of a rebuilt graph if one is within this distance; else it is unreachable."""
+    stuck_steps: int = 40
+    """Steps without leaving a disc of stuck_move_tol_m, with an unreached target, after which the target is given up."""
+    stuck_move_tol_m: float = 0.1
+    """Radius of the disc the robot must leave to count as making progress."""
+    target_timeout_steps: int = 250
+    """A target not reached after this many steps is given up."""
+    ban_steps: int = 100
+    """A given-up target (and, for frontier/random, a reached one) is not chosen again for this many steps ..."""
+    ban_radius_m: float = 0.5
+    """... nor any node within this distance of it."""
+    bump_radius_m: float = 0.25
+    """A robot that did not move at all between two steps with an unreached target was blocked (it bumped into
+    something the camera cannot see, or waited for a person): the disc of this radius one step ahead is marked
+    occupied in the grid (later frames clear it like any other cell) and the graph is rebuilt."""
+    forward_step_m: float = 0.25
+    """The robot's forward step (match RobotConfig.forward_step_m): where the bump disc is centred."""
+
+    def __post_init__(self) -> None:
+        check_config(self.variant in SELECTION_VARIANTS, "selection.variant", self.variant,
+                     f"one of {SELECTION_VARIANTS}")
+        for name in ("l_r", "l_c", "motion_weight", "l_d", "l_v"):
+            check_config(getattr(self, name) >= 0.0, f"selection.{name}", getattr(self, name), ">= 0")
+        check_config(math.isfinite(self.local_threshold), "selection.local_threshold", self.local_threshold, "finite")
+        check_config(self.visit_radius_m > 0.0, "selection.visit_radius_m", self.visit_radius_m, "> 0 m")
+        check_config(self.visit_norm_steps > 0.0, "selection.visit_norm_steps", self.visit_norm_steps, "> 0")
+        check_config(self.um_band_lo_m < self.um_band_hi_m, "selection.um_band_lo_m", self.um_band_lo_m,
+                     "below selection.um_band_hi_m")
+        check_config(self.rebuild_every >= 1, "selection.rebuild_every", self.rebuild_every, ">= 1")
+        check_config(self.rebuild_moved_m > 0.0, "selection.rebuild_moved_m", self.rebuild_moved_m, "> 0 m")
+        check_config(self.reach_tol_m > 0.0, "selection.reach_tol_m", self.reach_tol_m, "> 0 m")
+        check_config(0.0 < self.reach_yaw_deg <= 180.0, "selection.reach_yaw_deg", self.reach_yaw_deg, "in (0, 180]")
+        check_config(self.target_snap_m > 0.0, "selection.target_snap_m", self.target_snap_m, "> 0 m")
+        check_config(self.stuck_steps >= 1, "selection.stuck_steps", self.stuck_steps, ">= 1")
+        check_config(self.stuck_move_tol_m > 0.0, "selection.stuck_move_tol_m", self.stuck_move_tol_m, "> 0 m")
+        check_config(self.target_timeout_steps >= 1, "selection.target_timeout_steps", self.target_timeout_steps, ">= 1")
+        check_config(self.ban_steps >= 0, "selection.ban_steps", self.ban_steps, ">= 0")
+        check_config(self.ban_radius_m >= 0.0, "selection.ban_radius_m", self.ban_radius_m, ">= 0 m")
+        check_config(self.bump_radius_m >= 0.0, "selection.bump_radius_m", self.bump_radius_m, ">= 0 m")
+        check_config(self.forward_step_m > 0.0, "selection.forward_step_m", self.forward_step_m, "> 0 m")
+
+
+@dataclass(frozen=True, slots=True)
+class Target:
+    """A chosen target view and when and how it was chosen."""
+
+    xy_m: tuple[float, float]
+    yaw_rad: float
+    mode: str                     # local | global | random | frontier
+    chosen_step: int
+
+
+@dataclass(frozen=True, slots=True)
+class Scores:
+    """The candidate scores of the last scoring, on the graph built at ``graph_step``."""
+
+    graph_step: int
+    node: np.ndarray              # int32 (C,)
+    yaw_rad: np.ndarray           # float64 (C,)
+    gain: np.ndarray              # float64 (C,)
+    risk: np.ndarray              # float64 (C,)
+    cost: np.ndarray              # float64 (C,)
+    score: np.ndarray             # float64 (C,)
+
+    @staticmethod
+    def empty(graph_step: int = -1) -> "Scores":
+        z = np.zeros(0)
+        return Scores(graph_step, np.zeros(0, np.int32), z, z, z, z, z)
+
+
+@dataclass(frozen=True, slots=True)
+class SelectionState:
+    """Everything selection keeps between steps. The graph is never modified after it is built."""
+
+    grid: OccupancyGrid
+    graph: nx.Graph
+    arrays: GraphArrays
+    regions: Subregions
+    graph_step: int               # frame step at which the graph was built; -1 before the first build
+    target: Target | None
+    history_xy_m: np.ndarray      # float64 (T, 2) the robot's position at every step so far
+    stuck_anchor_xy_m: tuple[float, float] | None
+    stuck_count: int
+    banned: tuple[tuple[float, float, int], ...]   # (x, y, banned until this step)
+    scores: Scores
+    last_pose: tuple[float, float, float] | None   # (x, y, yaw) at the previous step
+
+    def __post_init__(self) -> None:
+        self.history_xy_m.flags.writeable = False
+
+
+def init_state(cfg: SelectionConfig) -> SelectionState:
+    """Step 0's state: an empty occupancy grid and graph, no target."""
+    assert isinstance(cfg, SelectionConfig)
+    G = nx.Graph()
+    return SelectionState(OccupancyGrid.empty(cfg.occupancy.cell_m), G, graph_arrays(G), Subregions(np.zeros(0, np.int64)),
+                          -1, None, np.zeros((0, 2)), None, 0, (), Scores.empty(), None)
+
+
+# ---------------------------------------------------------------------------------------------- helpers
+def _edge_um(arrays: GraphArrays, grid_origin_xy: np.ndarray, cell_m: float, fmap: FloorMap) -> np.ndarray:
+    """float64 (E,): mean floor U_m over each edge's cell chain."""
+    if arrays.n_edges == 0:
+        return np.zeros(0)
+    xy = grid_origin_xy + (arrays.cells[:, ::-1].astype(np.float64) + 0.5) * cell_m
+    vals = fmap.sample(xy)
+    counts = np.diff(arrays.cell_start)
+    sums = np.bincount(np.repeat(np.arange(arrays.n_edges), counts), weights=vals, minlength=arrays.n_edges)
+    return np.where(counts > 0, sums / np.maximum(counts, 1), 0.0)
+
+
+def _build_graph(cfg: SelectionConfig, grid: OccupancyGrid, fmap: FloorMap | None) -> tuple[nx.Graph, GraphArrays, Subregions]:
+    G = graph_from_occupancy(grid, cfg.occupancy, cfg.voronoi)
+    arrays = graph_arrays(G)
+    use_motion = cfg.variant == "full" and fmap is not None
+    um = _edge_um(arrays, G.graph["origin_xy_m"], G.graph["cell_m"], fmap) if use_motion else np.zeros(arrays.n_edges)
+    for a, b, m in zip(arrays.u.tolist(), arrays.v.tolist(), um.tolist()):
+        G.edges[a, b]["um_mean"] = m
+    sub_cfg = cfg.subregions
+    if not use_motion and sub_cfg.l_m != 0.0:
+        sub_cfg = SubregionConfig(sub_cfg.l_e, sub_cfg.l_p, 0.0, sub_cfg.method, sub_cfg.cut_distance)
+    return G, arrays, cluster_subregions(G, sub_cfg)
+
+
+def _nearest(xy_nodes: np.ndarray, xy: np.ndarray) -> tuple[int, float]:
+    if len(xy_nodes) == 0:
+        return -1, math.inf
+    d = np.hypot(xy_nodes[:, 0] - xy[0], xy_nodes[:, 1] - xy[1])
+    i = int(np.argmin(d))
+    return i, float(d[i])
+
+
+def _banned_mask(cfg: SelectionConfig, xy_nodes: np.ndarray, banned, now: int) -> np.ndarray:
+    mask = np.zeros(len(xy_nodes), bool)
+    for x, y, until in banned:
+        if until > now:
+            mask |= np.hypot(xy_nodes[:, 0] - x, xy_nodes[:, 1] - y) <= cfg.ban_radius_m
+    return mask
+
+
+def _path_lengths(arrays: GraphArrays, source: int, cost: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    if arrays.n_edges == 0:
+        d = np.full(arrays.n_nodes, np.inf)
+        d[source] = 0.0
+        return d, np.full(arrays.n_nodes, -9999)
+    return dijkstra(arrays, arrays.length_m if cost is None else cost, source)
+
+
+def _fields_arrays(fields: FieldsOut | None, rec: StepRecord):
+    """(occluders, u_s, u_m, origin, voxel) on the fields grid; None when there is no grid yet."""
+    if fields is None or 0 in fields.u_s.shape:
+        return None
+    m = rec.mapping
+    ijk = m.surface_ijk if m is not None else np.zeros((0, 3), np.int32)
+    svox = m.surface_voxel_m if m is not None else fields.voxel_m
+    occ = occluder_grid(ijk, svox, fields.origin_m, fields.voxel_m, fields.u_s.shape)
+    return occ, fields.u_s, fields.u_m, fields.origin_m, fields.voxel_m
+
+
+def _at_target(cfg: SelectionConfig, target: Target, robot_xy: np.ndarray, yaw_rad: float) -> bool:
+    return (math.hypot(robot_xy[0] - target.xy_m[0], robot_xy[1] - target.xy_m[1]) <= cfg.reach_tol_m
+            and abs(wrap_angle(target.yaw_rad - yaw_rad)) <= math.radians(cfg.reach_yaw_deg))
+
+
+def _mark_bump(cfg: SelectionConfig, grid: OccupancyGrid, centre_xy: np.ndarray) -> OccupancyGrid:
+    """The grid with the cells of a disc of ``bump_radius_m`` at ``centre_xy`` set to the occupied clamp."""
+    r = cfg.bump_radius_m
+    grid = grid.grown_to_include(centre_xy - r, centre_xy + r, cfg.occupancy.grow_chunk_m)
+    lo = grid.world_to_cell(centre_xy - r)
+    hi = grid.world_to_cell(centre_xy + r)
+    ii, jj = np.mgrid[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1]
+    ij = np.stack([ii.ravel(), jj.ravel()], axis=1)
+    c = grid.cell_to_world(ij)
+    ij = ij[(np.hypot(*(c - centre_xy).T) <= r) & grid.in_bounds(ij)]
+    logodds = grid.logodds.copy()
+    logodds[ij[:, 0], ij[:, 1]] = np.float32(cfg.occupancy.logodds_max)
+    return OccupancyGrid(grid.origin_ij, grid.cell_m, logodds)
+
+
+# ---------------------------------------------------------------------------------------------- choosing
+def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, arrays: GraphArrays, regions: Subregions,
+                 robot_node: int, robot_xy: np.ndarray, robot_yaw: float, fmap: FloorMap | None, banned: np.ndarray,
+                 history: np.ndarray, graph_step: int) -> tuple[Target | None, int, Scores]:
+    """Scored variants: candidate views at every reachable node, eqs. (7)-(10); returns (target, node, scores)."""
+    vis = cfg.visibility
+    xy_nodes = node_xy(state_graph)
+    full = cfg.variant == "full"
+    length_d, _ = _path_lengths(arrays, robot_node)
+    if full and fmap is not None and arrays.n_edges:
+        um_e = _edge_um(arrays, state_graph.graph["origin_xy_m"], state_graph.graph["cell_m"], fmap)
+        travel, _ = _path_lengths(arrays, robot_node, edge_cost(arrays.length_m, um_e, cfg.motion_weight))   # eq. (11)
+    else:
+        travel = length_d
+    reach = np.isfinite(length_d) & ~banned
+    nodes = np.nonzero(reach)[0]
+    fa = _fields_arrays(rec.fields, rec)
+    ny = cfg.visibility.n_yaws
+    if fa is None or len(nodes) == 0:
+        gain = np.zeros((len(nodes), ny))
+        risk = np.zeros((len(nodes), ny))
+    else:
+        occ, u_s, u_m, origin, voxel = fa
+        gs, gm = bin_gains(vis, occ, u_s, u_m, origin, voxel, xy_nodes[nodes])
+        gain, risk = view_gains(vis, gs), view_gains(vis, gm)                      # eqs. (8), (9)
+    cost = travel[nodes]
+    s_view = gain - (cfg.l_r * risk if full else 0.0)
+    score = s_view - (cfg.l_c * cost[:, None] if cfg.variant in ("gain_cost", "full") else 0.0)   # eq. (7)
+    yaws = vis.yaws_rad
+    # the view the robot already has is not a new target
+    here = (np.hypot(*(xy_nodes[nodes] - robot_xy).T) <= cfg.reach_tol_m)[:, None] & \
+        (np.abs((yaws[None, :] - robot_yaw + np.pi) % (2 * np.pi) - np.pi) <= math.radians(cfg.reach_yaw_deg))
+    score = np.where(here, -np.inf, score)
+    scores = Scores(graph_step, np.repeat(nodes, ny).astype(np.int32), np.tile(yaws, len(nodes)), gain.ravel(),
+                    risk.ravel(), np.repeat(cost, ny), score.ravel())
+    if len(nodes) == 0 or not np.isfinite(score).any():
+        return None, -1, scores
+    labels = regions.labels[nodes]
+    local = regions.labels[robot_node]
+
+    def best_in(mask: np.ndarray) -> tuple[int, int]:
+        s = np.where(mask[:, None], score, -np.inf)
+        flat = int(np.argmax(s))                       # first maximum: ties resolve to the lowest node id, then yaw
+        return flat // ny, flat % ny
+
+    mode = None
+    if full:
+        in_local = labels == local
+        if in_local.any():
+            r, k = best_in(in_local)
+            if score[r, k] > cfg.local_threshold:
+                mode = "local"
+        if mode is None:
+            others = [int(g) for g in np.unique(labels) if g != local and np.isfinite(score[labels == g]).any()]
+            if others:
+                tree = cKDTree(history) if len(history) else None
+                best_g, best_s = -1, -np.inf
+                for g in others:
+                    members = labels == g
+                    visits = np.array([len(v) for v in tree.query_ball_point(xy_nodes[nodes[members]], cfg.visit_radius_m)]) \
+                        if tree is not None else np.zeros(int(members.sum()))
+                    p_visit = float(visits.mean()) / cfg.visit_norm_steps
+                    best_view = np.max(np.where(np.isfinite(score[members]), s_view[members], -np.inf), axis=1)
+                    s_glob = (float(np.where(np.isfinite(best_view), best_view, 0.0).sum())
+                              - cfg.l_d * float(length_d[nodes[members]].min()) - cfg.l_v * p_visit)   # eq. (10)
+                    if s_glob > best_s:
+                        best_g, best_s = g, s_glob
+                r, k = best_in(labels == best_g)
+                mode = "global"
+            else:
+                r, k = best_in(np.ones(len(nodes), bool))
+                mode = "local"
+    else:
+        r, k = best_in(np.ones(len(nodes), bool))
+        mode = "local" if labels[r] == local else "global"
+    n = int(nodes[r])
+    return Target((float(xy_nodes[n, 0]), float(xy_nodes[n, 1])), float(wrap_angle(yaws[k])), mode, -1), n, scores
+
+
+def _choose_frontier(G: nx.Graph, arrays: GraphArrays, robot_node: int, robot_xy: np.ndarray, robot_yaw: float,
+                     banned: np.ndarray, reach_tol: float) -> tuple[Target | None, int]:
+    xy_nodes = node_xy(G)
+    d, pred = _path_lengths(arrays, robot_node)
+    fr = np.array([bool(G.nodes[i]["frontier"]) for i in range(len(xy_nodes))], bool)
+    ok = fr & np.isfinite(d) & ~banned & (np.hypot(*(xy_nodes - robot_xy).T) > reach_tol)
+    if not ok.any():
+        return None, -1
+    n = int(np.argmin(np.where(ok, d, np.inf)))
+    p = int(pred[n])
+    yaw = robot_yaw if p < 0 else math.atan2(xy_nodes[n, 1] - xy_nodes[p, 1], xy_nodes[n, 0] - xy_nodes[p, 0])
+    return Target((float(xy_nodes[n, 0]), float(xy_nodes[n, 1])), float(wrap_angle(yaw)), "frontier", -1), n
+
+
+def _choose_random(cfg: SelectionConfig, G: nx.Graph, arrays: GraphArrays, robot_node: int, robot_xy: np.ndarray,
+                   banned: np.ndarray, rng: np.random.Generator) -> tuple[Target | None, int]:
+    xy_nodes = node_xy(G)
+    d, _ = _path_lengths(arrays, robot_node)
+    ok = np.nonzero(np.isfinite(d) & ~banned & (np.hypot(*(xy_nodes - robot_xy).T) > cfg.reach_tol_m))[0]
+    if len(ok) == 0:
+        return None, -1
+    n = int(ok[rng.integers(len(ok))])
+    yaw = float(cfg.visibility.yaws_rad[rng.integers(cfg.visibility.n_yaws)])
+    return Target((float(xy_nodes[n, 0]), float(xy_nodes[n, 1])), float(wrap_angle(yaw)), "random", -1), n
+
+
+# ---------------------------------------------------------------------------------------------- the stage
+def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
+         rng: np.random.Generator) -> tuple[SelectionState, SelectionOut]:
+    """Update the occupancy grid and graph with frame t and keep or choose the target view.
+
+    Reads ``rec.frame`` (depth_m, K, T_world_cam, step), ``rec.perception.beta``,
+    ``rec.fields`` (u_s, u_m on its grid) and ``rec.mapping.surface_ijk / surface_voxel_m``
+    (occluders for the soft visibility). ``rng`` is used by the ``random`` variant only.
+    """
+    assert rec.perception is not None and rec.fields is not None, "selection runs after perception and fields"
+    state = init_state(cfg) if state is None else state
+    f = rec.frame
+    now = int(f.step)
+    pose = robot_pose_of(f)
+    robot_xy = np.array([pose.x_m, pose.y_m])
+    grid = update_occupancy(state.grid, cfg.occupancy, f.depth_m, f.K, f.T_world_cam, rec.perception.beta)
+    lp = state.last_pose
+    bumped = (state.target is not None and lp is not None and lp == (float(pose.x_m), float(pose.y_m), float(pose.yaw_rad))
+              and not _at_target(cfg, state.target, robot_xy, pose.yaw_rad))
+    if bumped and cfg.bump_radius_m > 0:
+        grid = _mark_bump(cfg, grid, robot_xy + cfg.forward_step_m * np.array([math.cos(pose.yaw_rad),
+                                                                                 math.sin(pose.yaw_rad)]))
+    history = np.concatenate([state.history_xy_m, robot_xy[None]])
+    fmap = motion_floor_map(rec.fields, cfg.um_band_lo_m, cfg.um_band_hi_m) if 0 not in rec.fields.u_m.shape else None
+
+    # graph (amortised rebuild)
+    G, arrays, regions, graph_step = state.graph, state.arrays, state.regions, state.graph_step
+    _, d_near = _nearest(node_xy(G), robot_xy)
+    if graph_step < 0 or now - graph_step >= cfg.rebuild_every or d_near > cfg.rebuild_moved_m or bumped:
+        G, arrays, regions = _build_graph(cfg, grid, fmap)
+        graph_step = now
+    xy_nodes = node_xy(G)
+    robot_node, _ = _nearest(xy_nodes, robot_xy)
+
+    # progress (stuck detection from the pose history)
+    anchor, count = state.stuck_anchor_xy_m, state.stuck_count
+    if anchor is None or math.hypot(robot_xy[0] - anchor[0], robot_xy[1] - anchor[1]) > cfg.stuck_move_tol_m:
+        anchor, count = (float(robot_xy[0]), float(robot_xy[1])), 0
+    else:
+        count += 1
+
+    # keep the target, or say why not
+    target, banned = state.target, tuple(b for b in state.banned if b[2] > now)
+    target_node, reason = -1, "none"
+    if target is not None and robot_node >= 0:
+        txy = np.array(target.xy_m)
+        target_node, d_snap = _nearest(xy_nodes, txy)
+        reachable = d_snap <= cfg.target_snap_m and np.isfinite(_path_lengths(arrays, robot_node)[0][target_node])
+        if _at_target(cfg, target, robot_xy, pose.yaw_rad):
+            reason = "reached"
+        elif not reachable:
+            reason = "unreachable"
+        elif count >= cfg.stuck_steps:
+            reason = "stuck"
+        elif now - target.chosen_step >= cfg.target_timeout_steps:
+            reason = "timeout"
+        else:
+            reason = "keep"
+    if reason in ("unreachable", "stuck", "timeout") or (reason == "reached" and cfg.variant in ("frontier", "random")):
+        banned = banned + ((target.xy_m[0], target.xy_m[1], now + cfg.ban_steps),)
+
+    scores = state.scores
+    mode = "keep"
+    if reason != "keep":
+        target, target_node, scores = None, -1, Scores.empty(graph_step)
+        if robot_node >= 0:
+            ban_mask = _banned_mask(cfg, xy_nodes, banned, now)
+            if cfg.variant == "frontier":
+                target, target_node = _choose_frontier(G, arrays, robot_node, robot_xy, pose.yaw_rad, ban_mask,
+                                                       cfg.reach_tol_m)
+            elif cfg.variant == "random":
+                target, target_node = _choose_random(cfg, G, arrays, robot_node, robot_xy, ban_mask, rng)
+            else:
+                target, target_node, scores = _score_views(cfg, rec, G, arrays, regions, robot_node, robot_xy,
+                                                           pose.yaw_rad, fmap, ban_mask, history, graph_step)
+        if target is not None:
+            target = Target(target.xy_m, target.yaw_rad, target.mode, now)
+            mode = target.mode
+            anchor, count = (float(robot_xy[0]), float(robot_xy[1])), 0
+        else:
+            mode = "none"
+
+    new_state = SelectionState(grid, G, arrays, regions, graph_step, target, history, anchor, count, banned, scores,
+                               (float(pose.x_m), float(pose.y_m), float(pose.yaw_rad)))
+    show = scores if scores.graph_step == graph_step else Scores.empty()
+    if target is None:
+        t_xy, t_yaw, t_node = robot_xy.copy(), float(pose.yaw_rad), -1
+    else:
+        t_xy, t_yaw, t_node = np.array(target.xy_m, np.float64), float(target.yaw_rad), int(target_node)
+    n = len(xy_nodes)
+    out = SelectionOut(
+        target_xy_m=t_xy, target_yaw_rad=t_yaw, target_node=t_node, mode=mode,
+        node_xy_m=xy_nodes.copy(),
+        edges=np.stack([arrays.u, arrays.v], axis=1).astype(np.int32) if arrays.n_edges else np.zeros((0, 2), np.int32),
+        edge_length_m=arrays.length_m.copy(),
+        node_region=regions.labels.astype(np.int32) if len(regions.labels) == n else np.zeros(n, np.int32),
+        frontier=np.array([bool(G.nodes[i]["frontier"]) for i in range(n)], bool),
+        cand_node=show.node.copy(), cand_yaw_rad=show.yaw_rad.copy(), cand_gain=show.gain.copy(),
+        cand_risk=show.risk.copy(), cand_cost=show.cost.copy(), cand_score=show.score.copy(),
+    )
+    return new_state, out
