@@ -8,17 +8,23 @@ floor passes gradients straight through; see :func:`beta_lowres`.)
 Loss, following the appearance + depth consistency loss of NeRF On-the-go and WildGS-SLAM.
 With the observed frame ``(I, D)``, the map's render at the same pose ``(I^, D^, A^)``
 (colour, expected depth, accumulated opacity) and the mask
-``M = (A^ > min_alpha) & (D > 0) & (D^ > 0)`` (only where the map is already opaque), the
-loss minimised over the MLP's weights is
+``M = (A^ > min_alpha) & (D > 0) & (D^ > 0) & ~stale`` (only where the map is already opaque,
+and not where the map shows a surface clearly in front of the observed one:
+``stale = D^ < D - stale_margin_m - stale_margin_rel * D``, a stale object such as a person who
+has walked on, which mapping carves out at this step; its residual says nothing about what
+the pixel shows now, and training on it would teach the predictor that the static surface
+behind a departed person is uncertain), the loss minimised over the MLP's weights is
 
-    L = mean_M[ r_ssim / beta^2 ]                     (1) appearance residual
+    L = w_a * mean_M[ r_ssim / beta^2 ]               (1) appearance residual
       + w_d * mean_M[ r_depth / beta^2 ]              (2) depth residual
       + 0.5 * mean_M[ log beta ]                      (3) keeps beta from growing without bound
       + w_reg * L_reg                                 (4) feature-similarity regulariser
 
 - ``r_ssim = clip((1 - SSIM(I, I^)) / 2, 0, 1)``, SSIM computed per pixel in a 7x7 Gaussian window
   (sigma 1.5 px) and averaged over RGB; it does not depend on beta, so it is computed once per frame.
-- ``r_depth = min(|D - D^|, depth_clip_m)``, in metres.
+- ``r_depth = min(|D - D^| / D, depth_clip)``, relative to the observed depth (``depth_relative``;
+  in metres when off): a person 1 m in front of a wall 4 m away and 0.5 m in front of one 2 m
+  away are equally surprising, and the far, poorly observed parts of the map do not dominate.
 - For a fixed residual ``r`` the data terms ``r / beta^2 + 0.5 log beta`` are minimised at
   ``beta = 2 sqrt(r)``: beta grows where the map cannot explain the frame (moving people).
 - ``L_reg``: for ``n_anchors`` random feature cells (drawn from the run's rng), the variance of
@@ -54,10 +60,14 @@ class UncertaintyConfig:
     """Adam steps on each new frame."""
     beta_min: float = 0.1
     """beta = max(u, beta_min) + 1e-3."""
+    appearance_weight: float = 0.25
+    """w_a: weight of the SSIM residual term."""
     depth_weight: float = 1.0
     """w_d: weight of the depth residual term."""
-    depth_clip_m: float = 1.0
-    """Depth residuals are clipped at this many metres."""
+    depth_clip: float = 1.0
+    """Depth residuals (relative, see depth_relative) are clipped at this value."""
+    depth_relative: bool = True
+    """Depth residual relative to the observed depth, |D - D^| / D, rather than in metres."""
     reg_weight: float = 1.0
     """w_reg: weight of the feature-similarity variance regulariser."""
     sim_threshold: float = 0.9
@@ -66,6 +76,10 @@ class UncertaintyConfig:
     """Anchor cells per step for the regulariser."""
     min_alpha: float = 0.9
     """The loss only uses pixels where the map's accumulated opacity exceeds this."""
+    stale_margin_m: float = 0.1
+    """Pixels where the map's surface is this far (m) in front of the observed one ..."""
+    stale_margin_rel: float = 0.05
+    """... plus this fraction of the observed depth are left out of the loss (stale map content)."""
     stats_momentum: float = 0.05
     """EMA momentum of the running feature mean / variance."""
 
@@ -74,7 +88,8 @@ class UncertaintyConfig:
                                   ("iters_per_frame", self.iters_per_frame >= 0, ">= 0"),
                                   ("beta_min", self.beta_min > 0, "> 0"),
                                   ("depth_weight", self.depth_weight >= 0, ">= 0"),
-                                  ("depth_clip_m", self.depth_clip_m > 0, "> 0"),
+                                  ("depth_clip", self.depth_clip > 0, "> 0"),
+                                  ("appearance_weight", self.appearance_weight >= 0, ">= 0"),
                                   ("reg_weight", self.reg_weight >= 0, ">= 0"),
                                   ("sim_threshold", -1 <= self.sim_threshold <= 1, "in [-1, 1]"),
                                   ("n_anchors", self.n_anchors >= 1, ">= 1"),
@@ -156,8 +171,12 @@ def residuals(rgb: np.ndarray, depth_m: np.ndarray, rgb_hat: np.ndarray, depth_h
     r_ssim = ((1.0 - ssim) / 2.0).clamp(0.0, 1.0)
     d = torch.tensor(depth_m, dtype=torch.float32)
     d_hat = torch.tensor(depth_hat_m, dtype=torch.float32)
-    r_depth = (d - d_hat).abs().clamp(max=cfg.depth_clip_m)
-    mask = (torch.tensor(alpha_hat) > cfg.min_alpha) & (d > 0) & (d_hat > 0)
+    r_depth = (d - d_hat).abs()
+    if cfg.depth_relative:
+        r_depth = r_depth / d.clamp(min=1e-3)
+    r_depth = r_depth.clamp(max=cfg.depth_clip)
+    stale = d_hat < d - cfg.stale_margin_m - cfg.stale_margin_rel * d
+    mask = (torch.tensor(alpha_hat) > cfg.min_alpha) & (d > 0) & (d_hat > 0) & ~stale
     return r_ssim, r_depth, mask
 
 
@@ -169,7 +188,7 @@ def loss_terms(cfg: UncertaintyConfig, params: tuple[torch.Tensor, ...], x: torc
     beta = upsample(beta_lo, tuple(r_ssim.shape))[mask]
     inv2 = 1.0 / beta ** 2
     terms = {
-        "appearance": (r_ssim[mask] * inv2).mean(),                         # (1)
+        "appearance": cfg.appearance_weight * (r_ssim[mask] * inv2).mean(),  # (1)
         "depth": cfg.depth_weight * (r_depth[mask] * inv2).mean(),          # (2)
         "log_beta": 0.5 * torch.log(beta).mean(),                           # (3)
     }
@@ -190,6 +209,53 @@ def _adam(params, grads, m, v, t: int, lr: float, b1: float = 0.9, b2: float = 0
     return params, m, v
 
 
+def with_feature_stats(cfg: UncertaintyConfig, state: UncertaintyState, feats: torch.Tensor) -> UncertaintyState:
+    """The state with its running feature mean / variance updated by one feature map (C, h, w)."""
+    c = feats.shape[0]
+    mom = cfg.stats_momentum if state.frames_seen else 1.0
+    flat = feats.reshape(c, -1)
+    mean = (1 - mom) * state.feat_mean + mom * flat.mean(1)
+    var = (1 - mom) * state.feat_var + mom * flat.var(1, unbiased=False)
+    return UncertaintyState(state.params, state.adam_m, state.adam_v, state.adam_t, mean, var, state.frames_seen + 1)
+
+
+@torch.no_grad()
+def predict(cfg: UncertaintyConfig, state: UncertaintyState, feats: torch.Tensor, size: tuple[int, int]) -> np.ndarray:
+    """float32 (H, W) beta of a frame from its features (C, h, w), with the state's weights and statistics."""
+    c, h, w = feats.shape
+    x = _standardise(feats, state.feat_mean, state.feat_var)
+    return upsample(beta_lowres(cfg, state.params, x, (h, w)), size).numpy().astype(np.float32)
+
+
+def train(cfg: UncertaintyConfig, state: UncertaintyState, feats: torch.Tensor, rgb: np.ndarray,
+          depth_m: np.ndarray, rgb_hat: np.ndarray, depth_hat_m: np.ndarray, alpha_hat: np.ndarray,
+          rng: np.random.Generator) -> tuple[UncertaintyState, float]:
+    """``cfg.iters_per_frame`` Adam steps of the loss above on one frame and the map's render of it.
+
+    ``feats`` (C, h, w); other arrays as in :func:`residuals`. Returns the new state and the
+    total loss at the last iteration (nan, and the state unchanged, when fewer than 16 pixels
+    are usable, e.g. while the map is still empty).
+    """
+    c, h, w = feats.shape
+    x = _standardise(feats, state.feat_mean, state.feat_var)
+    r_ssim, r_depth, mask = residuals(rgb, depth_m, rgb_hat, depth_hat_m, alpha_hat, cfg)
+    if int(mask.sum()) < 16 or cfg.iters_per_frame == 0:
+        return state, float("nan")
+    params, m, v, t = state.params, state.adam_m, state.adam_v, state.adam_t
+    xn = F.normalize(x, dim=1)
+    anchors = torch.from_numpy(rng.choice(h * w, size=min(cfg.n_anchors, h * w), replace=False))
+    similar = (xn[anchors] @ xn.T) > cfg.sim_threshold                  # (K, h*w), includes the anchor
+    loss = float("nan")
+    for _ in range(cfg.iters_per_frame):
+        p = tuple(q.detach().requires_grad_(True) for q in params)
+        terms = loss_terms(cfg, p, x, (h, w), r_ssim, r_depth, mask, anchors, similar)
+        grads = torch.autograd.grad(terms["total"], p)
+        t += 1
+        params, m, v = _adam(tuple(q.detach() for q in p), grads, m, v, t, cfg.lr)
+        loss = float(terms["total"].detach())
+    return UncertaintyState(params, m, v, t, state.feat_mean, state.feat_var, state.frames_seen), loss
+
+
 @dataclass(frozen=True)
 class UncertaintyStep:
     state: UncertaintyState
@@ -205,30 +271,7 @@ def update(cfg: UncertaintyConfig, state: UncertaintyState, feats: torch.Tensor,
 
     ``feats`` (C, h, w) from a feature extractor; other arrays as in :func:`residuals`.
     """
-    c, h, w = feats.shape
-    size = depth_m.shape
-    mom = cfg.stats_momentum if state.frames_seen else 1.0
-    flat = feats.reshape(c, -1)
-    mean = (1 - mom) * state.feat_mean + mom * flat.mean(1)
-    var = (1 - mom) * state.feat_var + mom * flat.var(1, unbiased=False)
-    x = _standardise(feats, mean, var)
-    with torch.no_grad():
-        before = upsample(beta_lowres(cfg, state.params, x, (h, w)), size)
-    r_ssim, r_depth, mask = residuals(rgb, depth_m, rgb_hat, depth_hat_m, alpha_hat, cfg)
-    params, m, v, t = state.params, state.adam_m, state.adam_v, state.adam_t
-    loss = float("nan")
-    if int(mask.sum()) >= 16 and cfg.iters_per_frame > 0:
-        xn = F.normalize(x, dim=1)
-        anchors = torch.from_numpy(rng.choice(h * w, size=min(cfg.n_anchors, h * w), replace=False))
-        similar = (xn[anchors] @ xn.T) > cfg.sim_threshold                  # (K, h*w), includes the anchor
-        for _ in range(cfg.iters_per_frame):
-            p = tuple(q.detach().requires_grad_(True) for q in params)
-            terms = loss_terms(cfg, p, x, (h, w), r_ssim, r_depth, mask, anchors, similar)
-            grads = torch.autograd.grad(terms["total"], p)
-            t += 1
-            params, m, v = _adam(tuple(q.detach() for q in p), grads, m, v, t, cfg.lr)
-            loss = float(terms["total"].detach())
-    with torch.no_grad():
-        after = upsample(beta_lowres(cfg, params, x, (h, w)), size)
-    new_state = UncertaintyState(params, m, v, t, mean, var, state.frames_seen + 1)
-    return UncertaintyStep(new_state, after.numpy().astype(np.float32), before.numpy().astype(np.float32), loss)
+    state = with_feature_stats(cfg, state, feats)
+    before = predict(cfg, state, feats, depth_m.shape)
+    state, loss = train(cfg, state, feats, rgb, depth_m, rgb_hat, depth_hat_m, alpha_hat, rng)
+    return UncertaintyStep(state, predict(cfg, state, feats, depth_m.shape), before, loss)

@@ -1,0 +1,400 @@
+"""Uncertainty-weighted Gaussian mapping with known poses (DESIGN.md §5, Mapping).
+
+Per step t (``step``), given frame t, its pose and beta_t from perception:
+
+1. **Render** the current map G_{t-1} at frame t's pose (no gradients). This render is
+   returned in :class:`MappingOut` (perception trains on it at step t+1; fields aggregate its
+   residual) and decides densification.
+2. **Densify**: one isotropic Gaussian per ``densify_stride``-th pixel where the frame has a
+   depth return and the map is not yet opaque there (alpha < ``densify_alpha``) or something
+   is observed clearly in front of the map's surface (depth disagreement). With weighting on,
+   pixels whose beta exceeds ``seed_beta_ratio`` times the frame's reference beta never seed
+   Gaussians. Additions stop at
+   ``max_gaussians``.
+3. **Keyframe**: every ``keyframe_every``-th frame joins the keyframe set, with its beta.
+4. **Optimise** ``iters`` Adam steps of the paper's mapping loss on views drawn from the
+   current frame (every other iteration), the last ``window`` keyframes and
+   ``random_older`` random older keyframes:
+
+       L = mean_px[ w * (l1 * L_color + l2 * L_depth) ] + l3 * L_iso
+       L_color = 0.8 |I^ - I|_1 + 0.2 (1 - SSIM(I^, I))      per pixel (mean over RGB)
+       L_depth = |D^ - D|                                    per pixel, where D > 0 and the render is opaque
+       w = (b_ref / max(beta, b_ref))^2                      the paper's 1 / beta^2, normalised
+
+   plus ``l_a * mean_px[ w * (1 - A^) ]`` over pixels with a depth return (A^ the render's
+   accumulated opacity): a silhouette term as in SplaTAM. Indoors every pixel with a return
+   sees a surface, and without this term the colour loss lets opacities drift down until
+   surfaces are half transparent (measured: median opacity 0.35 after 40 steps, 30 % of
+   pixels below alpha 0.8).
+
+   b_ref, the frame's reference beta, is the ``ref_percentile``-th percentile of beta over the
+   pixels with a depth return: the level of a confidently static pixel in that frame. beta's
+   absolute level follows how well the map explains the scene (perception calibrates it to the
+   residuals, which are larger while the map is young), so only beta relative to b_ref says
+   "this pixel is on something moving". Dividing by b_ref^2 is a constant per frame (Adam is
+   invariant to it), the clamp only affects the most confident pixels, and it keeps l3 meaning
+   the same with the weighting on and off. With ``weighted=False`` (the ablation "no weighted
+   mapping") w = 1 and beta is ignored entirely.
+5. **Carve** (every step): Gaussians that frame t shows to be in free space go: their centre
+   projects onto a pixel with a depth return (and, with weighting on, a confident beta there)
+   and lies in front of that return by more than ``carve_margin_m`` + ``carve_margin_rel`` *
+   depth + twice their largest scale. Something that was there has moved away: this is what
+   removes the ghosts of people who walked off (the depth term of the loss alone removes them
+   only slowly at a few iterations per step).
+6. **Prune** (every ``prune_every`` steps): Gaussians with opacity < ``prune_opacity`` or a
+   largest scale > ``prune_scale_m``.
+
+``refine`` is the offline refinement after the episode: the same loss over all keyframes.
+All tensors are float32 on the CPU by default (``device="cuda"`` uses gsplat when available).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import torch
+
+from dynactivegs.errors import check_config
+from dynactivegs.mapping.adam import AdamState, adam_step
+from dynactivegs.records import Frame, MappingOut, StepRecord
+from dynactivegs.splat.gaussians import Gaussians
+from dynactivegs.splat.losses import isotropy, l1_map, ssim_map
+from dynactivegs.splat.render import render
+
+
+@dataclass(frozen=True, slots=True)
+class MappingConfig:
+    """The Gaussian map and its online optimisation."""
+
+    weighted: bool = True
+    """Weight the loss by 1 / beta^2 and never seed Gaussians from uncertain pixels (off: the 'no weighted mapping' ablation)."""
+    iters: int = 6
+    """Adam iterations per step."""
+    color_weight: float = 1.0
+    """l1: weight of L_color."""
+    depth_weight: float = 1.0
+    """l2: weight of L_depth (metres)."""
+    iso_weight: float = 10.0
+    """l3: weight of the isotropy regulariser L_iso (metres)."""
+    alpha_weight: float = 0.5
+    """l_a: weight of the silhouette term (1 - alpha) on pixels with a depth return."""
+    ssim_weight: float = 0.2
+    """Share of (1 - SSIM) in L_color."""
+    ref_percentile: float = 20.0
+    """The frame's reference beta b_ref is this percentile of its beta; weights are (b_ref / max(beta, b_ref))^2."""
+    seed_beta_ratio: float = 1.5
+    """With weighting on, pixels with beta above this times b_ref never seed new Gaussians."""
+    densify_stride: int = 2
+    """New Gaussians are seeded from every densify_stride-th pixel (both directions)."""
+    densify_alpha: float = 0.5
+    """Pixels where the render's accumulated opacity is below this get new Gaussians."""
+    densify_depth_rel: float = 0.1
+    """... and pixels observed in front of the map's surface by more than this fraction of their depth."""
+    init_opacity: float = 0.6
+    """Peak opacity of a new Gaussian."""
+    max_gaussians: int = 60_000
+    """Cap on the map's size; densification stops there."""
+    keyframe_every: int = 3
+    """Every k-th frame becomes a keyframe."""
+    window: int = 6
+    """Optimisation views come from the last this-many keyframes ..."""
+    random_older: int = 4
+    """... and this many random older keyframes (drawn anew each step)."""
+    prune_every: int = 5
+    """Prune every this-many steps."""
+    prune_opacity: float = 0.05
+    """Gaussians below this opacity are pruned."""
+    prune_scale_m: float = 0.5
+    """Gaussians whose largest standard deviation exceeds this (m) are pruned."""
+    carve_margin_m: float = 0.1
+    """Free-space carving: a Gaussian must lie this far (m) in front of the observed depth ..."""
+    carve_margin_rel: float = 0.05
+    """... plus this fraction of the depth, plus twice its largest scale, to be removed."""
+    surface_voxel_m: float = 0.15
+    """Edge of the voxels of MappingOut.surface_ijk."""
+    surface_opacity: float = 0.5
+    """Gaussians at least this opaque count as surface in MappingOut.surface_ijk."""
+    lr_means: float = 1e-3
+    """Adam learning rate of the centres (m)."""
+    lr_log_scales: float = 5e-3
+    """Adam learning rate of the log scales."""
+    lr_quats: float = 2e-3
+    """Adam learning rate of the (unnormalised) quaternions."""
+    lr_opacity: float = 5e-2
+    """Adam learning rate of the opacity logits."""
+    lr_sh0: float = 2e-2
+    """Adam learning rate of the colour coefficients."""
+    device: str = "cpu"
+    """cpu (the numba rasterizer) or cuda (gsplat; needs the [cuda] extra)."""
+
+    def __post_init__(self) -> None:
+        c = check_config
+        c(self.iters >= 0, "mapping.iters", self.iters, ">= 0")
+        for name in ("color_weight", "depth_weight", "iso_weight", "alpha_weight"):
+            c(getattr(self, name) >= 0, f"mapping.{name}", getattr(self, name), ">= 0")
+        c(0 <= self.ssim_weight <= 1, "mapping.ssim_weight", self.ssim_weight, "in [0, 1]")
+        c(0 <= self.ref_percentile <= 100, "mapping.ref_percentile", self.ref_percentile, "in [0, 100]")
+        c(self.seed_beta_ratio >= 1, "mapping.seed_beta_ratio", self.seed_beta_ratio, ">= 1")
+        c(1 <= self.densify_stride <= 16, "mapping.densify_stride", self.densify_stride, "in [1, 16]")
+        c(0 < self.densify_alpha <= 1, "mapping.densify_alpha", self.densify_alpha, "in (0, 1]")
+        c(self.densify_depth_rel > 0, "mapping.densify_depth_rel", self.densify_depth_rel, "> 0")
+        c(0 < self.init_opacity < 1, "mapping.init_opacity", self.init_opacity, "in (0, 1)")
+        c(self.max_gaussians >= 1, "mapping.max_gaussians", self.max_gaussians, ">= 1")
+        c(self.keyframe_every >= 1, "mapping.keyframe_every", self.keyframe_every, ">= 1")
+        c(self.window >= 1, "mapping.window", self.window, ">= 1")
+        c(self.random_older >= 0, "mapping.random_older", self.random_older, ">= 0")
+        c(self.prune_every >= 1, "mapping.prune_every", self.prune_every, ">= 1")
+        c(0 <= self.prune_opacity < 1, "mapping.prune_opacity", self.prune_opacity, "in [0, 1)")
+        c(self.prune_scale_m > 0, "mapping.prune_scale_m", self.prune_scale_m, "> 0")
+        c(self.carve_margin_m >= 0, "mapping.carve_margin_m", self.carve_margin_m, ">= 0")
+        c(self.carve_margin_rel >= 0, "mapping.carve_margin_rel", self.carve_margin_rel, ">= 0")
+        c(0.02 <= self.surface_voxel_m <= 2, "mapping.surface_voxel_m", self.surface_voxel_m, "in [0.02, 2] m")
+        c(0 < self.surface_opacity < 1, "mapping.surface_opacity", self.surface_opacity, "in (0, 1)")
+        for name in ("lr_means", "lr_log_scales", "lr_quats", "lr_opacity", "lr_sh0"):
+            c(getattr(self, name) > 0, f"mapping.{name}", getattr(self, name), "> 0")
+        c(self.device in ("cpu", "cuda"), "mapping.device", self.device, "cpu or cuda")
+
+    @property
+    def lrs(self) -> tuple[float, ...]:
+        """Learning rates in the order of :meth:`Gaussians.tensors`."""
+        return (self.lr_means, self.lr_log_scales, self.lr_quats, self.lr_opacity, self.lr_sh0)
+
+
+@dataclass(frozen=True, slots=True)
+class Keyframe:
+    """A frame kept for optimisation, with the uncertainty it had when it was taken."""
+
+    step: int
+    rgb: np.ndarray                # uint8 (H, W, 3)
+    depth_m: np.ndarray            # float32 (H, W)
+    beta: np.ndarray | None        # float32 (H, W); None when the weighting is off
+    K: np.ndarray                  # float64 (3, 3)
+    T_world_cam: np.ndarray        # float64 (4, 4)
+
+
+@dataclass(frozen=True)
+class MappingState:
+    """The map, its optimiser moments and the keyframes."""
+
+    gaussians: Gaussians
+    adam: AdamState
+    keyframes: tuple[Keyframe, ...]
+    steps: int
+
+
+def init_state(cfg: MappingConfig) -> MappingState:
+    """An empty map."""
+    g = Gaussians.empty(torch.float32, cfg.device)
+    return MappingState(g, AdamState.zeros_like(g), (), 0)
+
+
+def _backend(cfg: MappingConfig) -> str:
+    return "cuda" if cfg.device == "cuda" else "cpu"
+
+
+def _render(cfg: MappingConfig, g: Gaussians, K: np.ndarray, T: np.ndarray, w: int, h: int):
+    return render(g, K, T, w, h, (0.0, 0.0, 0.0), backend=_backend(cfg))
+
+
+@torch.no_grad()
+def render_view(cfg: MappingConfig, g: Gaussians, K: np.ndarray, T_world_cam: np.ndarray, width: int,
+                height: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(rgb uint8 (H, W, 3), depth_m float32 (H, W), alpha float32 (H, W)) of the map from a camera."""
+    if len(g) == 0:
+        return (np.zeros((height, width, 3), np.uint8), np.zeros((height, width), np.float32),
+                np.zeros((height, width), np.float32))
+    out = _render(cfg, g, K, T_world_cam, width, height)
+    rgb = (out.rgb.clamp(0, 1) * 255.0 + 0.5).to(torch.uint8).cpu().numpy()
+    return rgb, out.depth.float().cpu().numpy(), out.alpha.float().cpu().numpy()
+
+
+def seed_mask(cfg: MappingConfig, depth_m: np.ndarray, beta: np.ndarray | None, render_depth_m: np.ndarray,
+              render_alpha: np.ndarray) -> np.ndarray:
+    """bool (H, W): pixels that seed new Gaussians (step 2 of the module docstring)."""
+    valid = depth_m > 0
+    in_front = (render_depth_m > 0) & (depth_m < render_depth_m * (1.0 - cfg.densify_depth_rel))
+    need = valid & ((render_alpha < cfg.densify_alpha) | in_front)
+    if cfg.weighted and beta is not None:
+        need &= beta <= cfg.seed_beta_ratio * reference_beta(cfg, beta, depth_m)   # never seed from people
+    return need
+
+
+def reference_beta(cfg: MappingConfig, beta: np.ndarray, depth_m: np.ndarray) -> float:
+    """b_ref: the ``ref_percentile``-th percentile of beta over pixels with a depth return."""
+    valid = depth_m > 0
+    return float(np.percentile(beta[valid] if valid.any() else beta, cfg.ref_percentile))
+
+
+def pixel_weights(cfg: MappingConfig, beta: np.ndarray | None, depth_m: np.ndarray) -> torch.Tensor:
+    """(H, W) loss weights (b_ref / max(beta, b_ref))^2, or ones when the weighting is off."""
+    if not cfg.weighted or beta is None:
+        return torch.ones(depth_m.shape)
+    b_ref = np.float32(reference_beta(cfg, beta, depth_m))
+    return torch.from_numpy((b_ref / np.maximum(beta, b_ref)) ** 2)
+
+
+def view_loss(cfg: MappingConfig, g: Gaussians, kf: Keyframe) -> torch.Tensor:
+    """The mapping loss of the module docstring on one view (differentiable in ``g``)."""
+    h, w = kf.depth_m.shape
+    out = _render(cfg, g, kf.K, kf.T_world_cam, w, h)
+    dev = out.rgb.device
+    target = torch.from_numpy(np.ascontiguousarray(kf.rgb, np.float32) / 255.0).to(dev)
+    depth = torch.from_numpy(np.array(kf.depth_m, np.float32)).to(dev)
+    valid = depth > 0
+    weight = pixel_weights(cfg, kf.beta, kf.depth_m).to(dev)
+    colour = ((1 - cfg.ssim_weight) * l1_map(out.rgb, target)
+              + cfg.ssim_weight * (1 - ssim_map(out.rgb, target, window=7, sigma=1.5)))
+    opaque = valid & (out.alpha.detach() > 0.5)
+    depth_err = torch.where(opaque, (out.depth - depth).abs(), torch.zeros_like(depth))
+    n_valid = valid.sum().clamp(min=1)
+    data = ((weight * colour * valid).sum() * cfg.color_weight + (weight * depth_err).sum() * cfg.depth_weight
+            + (weight * (1 - out.alpha) * valid).sum() * cfg.alpha_weight) / n_valid
+    return data + cfg.iso_weight * isotropy(g.log_scales)
+
+
+def optimise(cfg: MappingConfig, g: Gaussians, adam: AdamState, views: list[Keyframe]) -> tuple[Gaussians, AdamState, float]:
+    """One Adam step per view in ``views`` (in order); returns the map, moments and the last loss."""
+    loss = float("nan")
+    for kf in views:
+        if len(g) == 0:
+            break
+        params = tuple(p.detach().requires_grad_(True) for p in g.tensors())
+        g_req = Gaussians(*params)
+        total = view_loss(cfg, g_req, kf)
+        grads = torch.autograd.grad(total, params, allow_unused=True)
+        grads = tuple(torch.zeros_like(p) if gr is None else gr for p, gr in zip(params, grads))
+        g, adam = adam_step(g_req, grads, adam, cfg.lrs)
+        loss = float(total.detach())
+    return g, adam, loss
+
+
+def prune(cfg: MappingConfig, g: Gaussians, adam: AdamState) -> tuple[Gaussians, AdamState, int]:
+    """Drops transparent and oversized Gaussians; returns the map, moments and how many went."""
+    keep = (g.opacities >= cfg.prune_opacity) & (g.scales.max(dim=1).values <= cfg.prune_scale_m)
+    n = int((~keep).sum())
+    if n == 0:
+        return g, adam, 0
+    return g.masked(keep), adam.masked(keep), n
+
+
+def carve(cfg: MappingConfig, g: Gaussians, adam: AdamState, frame: Frame,
+          beta: np.ndarray | None) -> tuple[Gaussians, AdamState, int]:
+    """Removes Gaussians that frame shows to be in free space (step 5 of the module docstring)."""
+    if len(g) == 0:
+        return g, adam, 0
+    T_cam_world = np.linalg.inv(frame.T_world_cam)
+    means = g.means.detach().cpu().double().numpy()
+    p = means @ T_cam_world[:3, :3].T + T_cam_world[:3, 3]
+    z = p[:, 2]
+    h, w = frame.height, frame.width
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = np.floor(frame.K[0, 0] * p[:, 0] / z + frame.K[0, 2])
+        v = np.floor(frame.K[1, 1] * p[:, 1] / z + frame.K[1, 2])
+    inside = (z > 0.05) & (u >= 0) & (u < w) & (v >= 0) & (v < h)
+    idx = np.flatnonzero(inside)
+    ui, vi = u[idx].astype(np.int64), v[idx].astype(np.int64)
+    d = frame.depth_m[vi, ui].astype(np.float64)
+    reach = g.scales.detach().cpu().double().numpy().max(axis=1)[idx]
+    free = (d > 0) & (z[idx] < d - cfg.carve_margin_m - cfg.carve_margin_rel * d - 2.0 * reach)
+    if cfg.weighted and beta is not None:
+        free &= beta[vi, ui] <= cfg.seed_beta_ratio * reference_beta(cfg, beta, frame.depth_m)
+    if not free.any():
+        return g, adam, 0
+    keep = np.ones(len(g), bool)
+    keep[idx[free]] = False
+    keep_t = torch.from_numpy(keep).to(g.means.device)
+    return g.masked(keep_t), adam.masked(keep_t), int((~keep).sum())
+
+
+def surface_voxels(cfg: MappingConfig, g: Gaussians) -> np.ndarray:
+    """int32 (M, 3): sorted unique voxels holding the centre of an opaque Gaussian."""
+    if len(g) == 0:
+        return np.zeros((0, 3), np.int32)
+    means = g.means[g.opacities >= cfg.surface_opacity].detach().cpu().double().numpy()
+    ijk = np.floor(means / cfg.surface_voxel_m).astype(np.int32)
+    return np.unique(ijk, axis=0) if len(ijk) else np.zeros((0, 3), np.int32)
+
+
+def _views(cfg: MappingConfig, current: Keyframe, keyframes: tuple[Keyframe, ...],
+           rng: np.random.Generator) -> list[Keyframe]:
+    """The views of this step's iterations: the current frame every other iteration, else keyframes."""
+    window = list(keyframes[-cfg.window:])
+    older = list(keyframes[:-cfg.window])
+    if older and cfg.random_older:
+        picks = rng.choice(len(older), size=min(cfg.random_older, len(older)), replace=False)
+        window += [older[i] for i in sorted(picks)]
+    views = []
+    for i in range(cfg.iters):
+        if i % 2 == 0 or not window:
+            views.append(current)
+        else:
+            views.append(window[int(rng.integers(len(window)))])
+    return views
+
+
+def step(cfg: MappingConfig, rec: StepRecord, state: MappingState,
+         rng: np.random.Generator) -> tuple[MappingState, MappingOut]:
+    """Reads ``rec.frame`` and ``rec.perception.beta`` (ignored when ``cfg.weighted`` is off)."""
+    frame: Frame = rec.frame
+    assert rec.perception is not None or not cfg.weighted, "weighted mapping needs rec.perception"
+    beta = rec.perception.beta if (cfg.weighted and rec.perception is not None) else None
+    h, w = frame.height, frame.width
+    g, adam = state.gaussians, state.adam
+
+    r_rgb, r_depth, r_alpha = render_view(cfg, g, frame.K, frame.T_world_cam, w, h)     # 1. G_{t-1} at pose t
+
+    seeds = seed_mask(cfg, frame.depth_m, beta, r_depth, r_alpha)                       # 2. densify
+    new = Gaussians.from_rgbd(frame.rgb, frame.depth_m, frame.K, frame.T_world_cam, mask=seeds,
+                              stride=cfg.densify_stride, opacity=cfg.init_opacity).to(device=cfg.device)
+    room = max(cfg.max_gaussians - len(g), 0)
+    if len(new) > room:
+        keep = np.zeros(len(new), bool)
+        keep[rng.choice(len(new), size=room, replace=False)] = True
+        new = new.masked(torch.from_numpy(keep).to(cfg.device))
+    n_added = len(new)
+    if n_added:
+        g, adam = Gaussians.cat([g, new]), adam.cat(new)
+
+    current = Keyframe(frame.step, frame.rgb, frame.depth_m, beta, frame.K, frame.T_world_cam)
+    is_key = state.steps % cfg.keyframe_every == 0                                      # 3. keyframes
+    keyframes = state.keyframes
+    g, adam, loss = optimise(cfg, g, adam, _views(cfg, current, keyframes, rng))       # 4. optimise
+    if is_key:
+        keyframes = keyframes + (current,)
+
+    g, adam, n_pruned = carve(cfg, g, adam, frame, beta)                               # 5. carve
+    if (state.steps + 1) % cfg.prune_every == 0:                                        # 6. prune
+        g, adam, n = prune(cfg, g, adam)
+        n_pruned += n
+
+    out = MappingOut(render_rgb=r_rgb, render_depth_m=r_depth, render_alpha=r_alpha,
+                     surface_ijk=surface_voxels(cfg, g), surface_voxel_m=cfg.surface_voxel_m,
+                     n_gaussians=len(g), n_added=n_added, n_pruned=n_pruned, loss=loss, keyframe=is_key)
+    return MappingState(g, adam, keyframes, state.steps + 1), out
+
+
+def refine(cfg: MappingConfig, state: MappingState, iters: int, rng: np.random.Generator,
+           progress: Callable[[int], None] | None = None) -> MappingState:
+    """Offline refinement after the episode: ``iters`` Adam steps over all keyframes (random order,
+    each keyframe once per pass), then a final prune. ``progress(k)`` is called after each step."""
+    g, adam, kfs = state.gaussians, state.adam, state.keyframes
+    if not kfs or iters <= 0 or len(g) == 0:
+        return state
+    order: list[int] = []
+    while len(order) < iters:
+        order += [int(i) for i in rng.permutation(len(kfs))]
+    for k, i in enumerate(order[:iters]):
+        g, adam, _ = optimise(cfg, g, adam, [kfs[i]])
+        if progress is not None:
+            progress(k + 1)
+    g, adam, _ = prune(cfg, g, adam)
+    return MappingState(g, adam, kfs, state.steps)
+
+
+def psnr_db(a: np.ndarray, b: np.ndarray) -> float:
+    """PSNR of two uint8 images (dB)."""
+    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2)) / 255.0 ** 2
+    return math.inf if mse == 0 else -10.0 * math.log10(mse)
