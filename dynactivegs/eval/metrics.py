@@ -1,0 +1,119 @@
+"""All metrics of a Gaussian map on one scene, and the per-scene state needed to compute them.
+
+:class:`SceneEvaluator` holds what is fixed for a scene (ground-truth points and their
+KD-tree, the renderer, free space, survey views, the LPIPS model if any) so that the
+metrics at several checkpoints of a run, or for several runs, share it.
+:meth:`SceneEvaluator.evaluate` gives a :class:`Metrics`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from dynactivegs.config import SimConfig
+from dynactivegs.eval.config import EvalConfig
+from dynactivegs.eval.geometry import GroundTruthPoints, geometry_metrics, ground_truth_points
+from dynactivegs.eval.lpips import load_lpips
+from dynactivegs.eval.progress import CoverageProbe
+from dynactivegs.eval.recon import ReconPoints, centre_points, rendered_points
+from dynactivegs.eval.rendering import render_metrics
+from dynactivegs.eval.views import camera_intrinsics, ground_truth_renders, heldout_views, survey_views
+from dynactivegs.sim.scenes import load_scene, scene_freespace, scene_renderer
+from dynactivegs.splat.gaussians import Gaussians
+from dynactivegs.splat.render import Backend
+
+
+@dataclass(frozen=True)
+class Metrics:
+    """The metrics of one map at one step (DESIGN.md §6). Distances in cm, ratios in %."""
+
+    step: int
+    acc_cm: float                 # recon -> GT mean nearest distance
+    comp_cm: float                # GT -> recon mean nearest distance
+    cr_pct: float                 # % of GT points within cr_threshold_cm of the recon
+    cr_threshold_cm: float
+    recon_method: str             # "renders" or "centres"
+    recon_description: str        # how the reconstruction points were extracted
+    n_recon_points: int
+    n_gt_points: int
+    psnr_db: float                # held-out views, mean over views
+    ssim: float
+    depth_l1_cm: float
+    lpips: float | None           # None when LPIPS weights are not available locally
+    lpips_note: str               # the weights used, or why LPIPS is n/a
+    n_views: int
+
+    def summary(self) -> str:
+        """One line for logs and progress bars."""
+        lp = f"LPIPS {self.lpips:.3f}" if self.lpips is not None else f"LPIPS n/a ({self.lpips_note})"
+        return (f"step {self.step}: Acc {self.acc_cm:.2f} cm, Comp {self.comp_cm:.2f} cm, "
+                f"C.R. {self.cr_pct:.1f} % (<{self.cr_threshold_cm:g} cm) | PSNR {self.psnr_db:.2f} dB, "
+                f"SSIM {self.ssim:.3f}, {lp}, depth L1 {self.depth_l1_cm:.2f} cm on {self.n_views} held-out views "
+                f"| recon: {self.recon_method}, {self.n_recon_points} pts")
+
+
+class SceneEvaluator:
+    """Metrics of Gaussian maps of one scene. Builds (or loads) the ground truth on construction."""
+
+    def __init__(self, sim: SimConfig, cfg: EvalConfig) -> None:
+        self.sim = sim
+        self.cfg = cfg
+        self.scene = load_scene(sim)
+        self.renderer = scene_renderer(self.scene)
+        self.freespace = scene_freespace(self.scene, self.renderer, sim.grid_res_m, sim.robot.body_height_m)
+        self.gt: GroundTruthPoints = ground_truth_points(sim, cfg)
+        self._gt_tree = cKDTree(self.gt.points_m)
+        self.K = camera_intrinsics(sim.camera)
+        self._survey: np.ndarray | None = None
+        self.lpips_model, self.lpips_note = load_lpips(cfg.lpips_weights_path)
+
+    @property
+    def survey_poses(self) -> np.ndarray:
+        """(V, 4, 4) views the "renders" reconstruction points are extracted from (computed once)."""
+        if self._survey is None:
+            self._survey = survey_views(self.freespace, self.sim.robot.radius_m, self.sim.camera,
+                                        self.cfg.survey_spacing_m, self.cfg.survey_yaws)
+        return self._survey
+
+    def coverage_probe(self) -> CoverageProbe:
+        """A probe of ``cfg.coverage_points`` ground-truth points at the C.R. threshold."""
+        return CoverageProbe.from_ground_truth(self.gt.points_m, self.cfg.coverage_points, self.cfg.cr_threshold_cm,
+                                               self.cfg.gt_seed)
+
+    def recon_points(self, gaussians: Gaussians, method: str | None = None, backend: Backend = "auto") -> ReconPoints:
+        """Reconstruction points of the map by ``method`` (default ``cfg.recon_method``)."""
+        method = self.cfg.recon_method if method is None else method
+        if method == "centres":
+            return centre_points(gaussians, opacity_min=self.cfg.opacity_min, voxel_m=self.cfg.voxel_m)
+        assert method == "renders", f"unknown reconstruction method {method!r}"
+        cam = self.sim.camera
+        return rendered_points(gaussians, self.survey_poses, self.K, cam.width_px, cam.height_px,
+                               alpha_min=self.cfg.alpha_min, voxel_m=self.cfg.voxel_m, backend=backend)
+
+    def heldout(self, trajectory_xy_m: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Held-out poses (V, 4, 4) away from the trajectory (T, 2), and their static-only rgb and depth."""
+        poses = heldout_views(self.freespace, self.sim.robot.radius_m, self.sim.camera, self.cfg.n_views,
+                              self.cfg.view_seed, self.scene.name, trajectory_xy_m, self.cfg.min_trajectory_dist_m)
+        rgb, depth = ground_truth_renders(self.renderer, poses, self.sim.camera)
+        return poses, rgb, depth
+
+    def evaluate(self, gaussians: Gaussians, *, step: int, trajectory_xy_m: np.ndarray | None,
+                 method: str | None = None, backend: Backend = "auto") -> Metrics:
+        """All metrics of the map: geometry against the ground-truth points, rendering on held-out views.
+
+        ``trajectory_xy_m`` (T, 2): the robot positions the map was built from; held-out views
+        keep ``cfg.min_trajectory_dist_m`` away from them.
+        """
+        rec = self.recon_points(gaussians, method, backend)
+        geo = geometry_metrics(rec.points_m, self.gt.points_m, self.cfg.cr_threshold_cm, gt_tree=self._gt_tree)
+        poses, rgb, depth = self.heldout(trajectory_xy_m)
+        ren = render_metrics(gaussians, poses, rgb, depth, self.K, lpips_model=self.lpips_model,
+                             lpips_note=self.lpips_note, backend=backend)
+        return Metrics(step=step, acc_cm=geo.acc_cm, comp_cm=geo.comp_cm, cr_pct=geo.cr_pct,
+                       cr_threshold_cm=geo.cr_threshold_cm, recon_method=rec.method,
+                       recon_description=rec.description, n_recon_points=geo.n_recon, n_gt_points=geo.n_gt,
+                       psnr_db=ren.psnr_db, ssim=ren.ssim, depth_l1_cm=ren.depth_l1_cm, lpips=ren.lpips,
+                       lpips_note=ren.lpips_note, n_views=ren.n_views)

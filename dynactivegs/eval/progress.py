@@ -1,0 +1,68 @@
+"""Progress over a run: the 25/50/75/100 % checkpoints of a step budget and a cheap coverage metric.
+
+The full metrics (:class:`dynactivegs.eval.metrics.SceneEvaluator`) render the map at many
+views; they run at the checkpoints. Coverage is cheap enough for every few steps (a
+progress bar, a viewer plot): the percentage of a fixed subsample of the ground-truth
+points that have an opaque Gaussian centre within the C.R. threshold. It tracks C.R. from
+below-or-near (Gaussian centres are sparser than rendered surfaces) and is not a
+replacement for it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from dynactivegs.rng import derive_rng
+
+CHECKPOINT_FRACTIONS = (0.25, 0.5, 0.75, 1.0)
+
+
+def checkpoint_steps(budget: int, fractions: tuple[float, ...] = CHECKPOINT_FRACTIONS) -> tuple[int, ...]:
+    """The step counts at which each fraction of ``budget`` steps is spent: ``ceil(f * budget)``, at least 1.
+
+    With ``budget = 1000``: (250, 500, 750, 1000). One entry per fraction, in order, so
+    ``dict(zip(fractions, checkpoint_steps(budget, fractions)))`` maps fractions to steps;
+    for tiny budgets neighbouring fractions may share a step.
+    """
+    if budget < 1:
+        raise ValueError(f"step budget must be >= 1; got {budget}")
+    assert all(0.0 < f <= 1.0 for f in fractions), "fractions must lie in (0, 1]"
+    return tuple(max(1, math.ceil(f * budget - 1e-9)) for f in fractions)
+
+
+@dataclass(frozen=True)
+class CoverageProbe:
+    """A fixed subsample of ground-truth points and a distance threshold, for cheap coverage checks."""
+
+    points_m: np.ndarray          # float64 (M, 3), subsample of the ground-truth points
+    threshold_cm: float
+
+    @staticmethod
+    def from_ground_truth(gt_points_m: np.ndarray, n: int, threshold_cm: float, seed: int = 0) -> "CoverageProbe":
+        """``n`` ground-truth points (N, 3) chosen without replacement (all when N <= n), seeded."""
+        assert gt_points_m.ndim == 2 and gt_points_m.shape[1] == 3
+        if len(gt_points_m) <= n:
+            return CoverageProbe(np.asarray(gt_points_m, dtype=np.float64).copy(), threshold_cm)
+        idx = np.sort(derive_rng(seed, "coverage-probe").choice(len(gt_points_m), size=n, replace=False))
+        return CoverageProbe(np.asarray(gt_points_m[idx], dtype=np.float64), threshold_cm)
+
+    def __call__(self, recon_points_m: np.ndarray) -> float:
+        """Percentage of probe points with a point of ``recon_points_m`` (N, 3) within the threshold."""
+        assert recon_points_m.ndim == 2 and recon_points_m.shape[1] == 3
+        if len(recon_points_m) == 0:
+            return 0.0
+        d, _ = cKDTree(recon_points_m).query(self.points_m, distance_upper_bound=self.threshold_cm / 100.0)
+        return float(np.isfinite(d).mean() * 100.0)
+
+    def of_gaussians(self, gaussians, opacity_min: float = 0.5) -> float:
+        """Coverage (%) by the centres of the Gaussians (a :class:`~dynactivegs.splat.Gaussians`) above ``opacity_min``."""
+        import torch
+
+        with torch.no_grad():
+            keep = gaussians.opacities > opacity_min
+            pts = gaussians.means[keep].detach().to("cpu", torch.float64).numpy()
+        return self(pts)

@@ -1,0 +1,101 @@
+"""Novel-view quality of a Gaussian map: PSNR, SSIM, LPIPS and depth L1 against static-only renders.
+
+Per view, then averaged over views (the 3DGS convention):
+
+- PSNR (dB) of RGB in [0, 1] over the whole image (:func:`dynactivegs.splat.losses.psnr`);
+- SSIM, 11 x 11 Gaussian window, sigma 1.5 (:func:`dynactivegs.splat.losses.ssim`);
+- depth L1 (cm): mean |rendered - true| z-depth over pixels with a true depth return; a
+  pixel the map leaves empty counts with its rendered depth 0;
+- LPIPS (AlexNet) only with a model loaded from local weights (:mod:`dynactivegs.eval.lpips`);
+  otherwise ``None`` and the reason.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from dynactivegs.eval.lpips import LpipsAlex
+from dynactivegs.splat.gaussians import Gaussians
+from dynactivegs.splat.losses import psnr, ssim
+from dynactivegs.splat.render import Backend, render
+
+
+def _image(rgb: np.ndarray | torch.Tensor) -> torch.Tensor:
+    """float64 (H, W, 3) tensor in [0, 1] from uint8 0..255 or float 0..1."""
+    t = torch.as_tensor(np.asarray(rgb) if not isinstance(rgb, torch.Tensor) else rgb.detach().cpu())
+    t = t.to(torch.float64) / 255.0 if t.dtype == torch.uint8 else t.to(torch.float64)
+    assert t.dim() == 3 and t.shape[-1] == 3, f"images must be (H, W, 3); got {tuple(t.shape)}"
+    return t
+
+
+def psnr_db(pred_rgb: np.ndarray | torch.Tensor, true_rgb: np.ndarray | torch.Tensor) -> float:
+    """PSNR in dB of two (H, W, 3) images (uint8 or float in [0, 1]); inf for identical images."""
+    return psnr(_image(pred_rgb).clamp(0, 1), _image(true_rgb))
+
+
+def ssim_value(pred_rgb: np.ndarray | torch.Tensor, true_rgb: np.ndarray | torch.Tensor) -> float:
+    """Mean SSIM of two (H, W, 3) images (uint8 or float in [0, 1]); 1 for identical images."""
+    return float(ssim(_image(pred_rgb).clamp(0, 1), _image(true_rgb)))
+
+
+def depth_l1_cm(pred_depth_m: np.ndarray | torch.Tensor, true_depth_m: np.ndarray | torch.Tensor) -> float:
+    """Mean |pred - true| in cm over pixels with a true depth return (true > 0); NaN when there is none."""
+    pred = np.asarray(pred_depth_m.detach().cpu() if isinstance(pred_depth_m, torch.Tensor) else pred_depth_m,
+                      dtype=np.float64)
+    true = np.asarray(true_depth_m, dtype=np.float64)
+    assert pred.shape == true.shape and pred.ndim == 2, f"depths must be (H, W); got {pred.shape}, {true.shape}"
+    valid = np.isfinite(true) & (true > 0)
+    if not valid.any():
+        return float("nan")
+    p = np.where(np.isfinite(pred), pred, 0.0)
+    return float(np.abs(p[valid] - true[valid]).mean() * 100.0)
+
+
+def _nanmean(values: list[float]) -> float:
+    finite = [x for x in values if not np.isnan(x)]
+    return float(np.mean(finite)) if finite else float("nan")
+
+
+@dataclass(frozen=True)
+class RenderMetrics:
+    """Novel-view metrics averaged over views."""
+
+    psnr_db: float
+    ssim: float
+    depth_l1_cm: float
+    lpips: float | None           # None: not computed (see lpips_note)
+    lpips_note: str               # where the LPIPS weights came from, or why LPIPS is n/a
+    n_views: int
+
+
+def render_metrics(gaussians: Gaussians, poses: np.ndarray, true_rgb: np.ndarray, true_depth_m: np.ndarray,
+                   K: np.ndarray, *, lpips_model: LpipsAlex | None = None, lpips_note: str = "",
+                   backend: Backend = "auto") -> RenderMetrics:
+    """Render the map at ``poses`` (V, 4, 4) and compare with the true rgb (V, H, W, 3) and depth (V, H, W).
+
+    Renders use a black background, like the simulator's images where no surface is hit.
+    """
+    assert poses.ndim == 3 and poses.shape[1:] == (4, 4)
+    v, h, w = true_depth_m.shape
+    assert len(poses) == v and true_rgb.shape == (v, h, w, 3)
+    ps, ss, ds, lp = [], [], [], []
+    with torch.no_grad():
+        for i, T in enumerate(poses):
+            out = render(gaussians, K, T, w, h, backend=backend)
+            pred = out.rgb.detach().to("cpu", torch.float64).clamp(0, 1)
+            true = _image(true_rgb[i])
+            ps.append(psnr(pred, true))
+            ss.append(float(ssim(pred, true)))
+            ds.append(depth_l1_cm(out.depth.detach().cpu().numpy(), true_depth_m[i]))
+            if lpips_model is not None:
+                a = pred.to(torch.float32).permute(2, 0, 1)[None]
+                b = true.to(torch.float32).permute(2, 0, 1)[None]
+                lp.append(float(lpips_model(a, b)[0]))
+    return RenderMetrics(psnr_db=_nanmean(ps), ssim=_nanmean(ss),
+                         depth_l1_cm=_nanmean(ds),
+                         lpips=float(np.mean(lp)) if lp else None,
+                         lpips_note=lpips_note or ("LPIPS model given" if lpips_model else "no LPIPS model given"),
+                         n_views=len(poses))
