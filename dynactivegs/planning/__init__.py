@@ -5,6 +5,8 @@
   planner variants ``shortest | dyn_edge | dyn_edge_temporal``.
 - :mod:`~dynactivegs.planning.actions`: a path and target yaw turned into the next discrete
   action, the local collision check against the current depth frame, and a stuck detector.
+- :mod:`~dynactivegs.planning.stage`: the planning stage (``PlanningConfig``,
+  ``PlanningState``, ``init_state``, ``step``).
 
 NumPy / SciPy / networkx only; never imports torch.
 """

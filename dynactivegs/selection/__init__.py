@@ -7,6 +7,10 @@
   eroded by the robot radius) as a networkx graph, with frontier nodes marked.
 - :mod:`~dynactivegs.selection.subregions`: agglomerative clustering of graph nodes with the
   dynamic-aware distance d_dyn of the paper's eq. (6).
+- :mod:`~dynactivegs.selection.visibility`: soft visibility of query voxels from candidate
+  views and the view gains I_s, R_m (eqs. 8-9).
+- :mod:`~dynactivegs.selection.stage`: the selection stage (``SelectionConfig``,
+  ``SelectionState``, ``init_state``, ``step``): target keeping, variants, eqs. (7) and (10).
 
 Everything here is NumPy / SciPy / networkx (numba for one kernel) and never imports torch.
 """
