@@ -29,6 +29,8 @@ from torch import nn
 ALEX_CONVS = ((0, 3, 64, 11, 4, 2), (3, 64, 192, 5, 1, 2), (6, 192, 384, 3, 1, 1), (8, 384, 256, 3, 1, 1),
               (10, 256, 256, 3, 1, 1))
 """AlexNet feature convolutions: (torchvision index, in channels, out channels, kernel, stride, padding)."""
+LPIPS_MIN_PX = 31
+"""Smallest image side the AlexNet trunk accepts (its third pooling stage needs a 3 x 3 input)."""
 SHIFT = (-0.030, -0.088, -0.188)
 SCALE = (0.458, 0.448, 0.450)
 

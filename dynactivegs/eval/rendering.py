@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from dynactivegs.eval.lpips import LpipsAlex
+from dynactivegs.eval.lpips import LPIPS_MIN_PX, LpipsAlex
 from dynactivegs.splat.gaussians import Gaussians
 from dynactivegs.splat.losses import psnr, ssim
 from dynactivegs.splat.render import Backend, render
@@ -81,6 +81,8 @@ def render_metrics(gaussians: Gaussians, poses: np.ndarray, true_rgb: np.ndarray
     assert poses.ndim == 3 and poses.shape[1:] == (4, 4)
     v, h, w = true_depth_m.shape
     assert len(poses) == v and true_rgb.shape == (v, h, w, 3)
+    if lpips_model is not None and min(h, w) < LPIPS_MIN_PX:
+        lpips_model, lpips_note = None, f"images too small for LPIPS ({w}x{h} px; AlexNet needs >= {LPIPS_MIN_PX} px)"
     ps, ss, ds, lp = [], [], [], []
     with torch.no_grad():
         for i, T in enumerate(poses):
