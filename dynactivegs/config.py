@@ -1,145 +1,30 @@
-"""Frozen configuration dataclasses, one per component, and the top-level :class:`DagsConfig`.
+"""Frozen configuration dataclasses: one per stage, the simulator's, the top-level :class:`DagsConfig`
+and the named presets of the paper's ablations.
 
-Each field has a docstring underneath it; ``tyro`` turns these into ``--help`` text.
-Values are checked on construction and a bad one raises :class:`ConfigError` naming the
-field, the value and the allowed range.
+Each field has a docstring underneath it; ``tyro`` turns these into ``--help`` text. Values are
+checked on construction and a bad one raises :class:`ConfigError` naming the field, the value
+and the allowed range. :func:`with_overrides` applies ``key=value`` strings
+(``mapping.weighted=false``) as used by ``dagsreplay --set``.
 """
 
 from __future__ import annotations
 
-import math
+import dataclasses
+import json
 from dataclasses import dataclass, field
 
-from dynactivegs.errors import check_config
+from dynactivegs.errors import ConfigError, check_config
+from dynactivegs.fields.grid import FieldsConfig
+from dynactivegs.mapping.config import MappingConfig
+from dynactivegs.perception.config import FeatureConfig, PerceptionConfig, UncertaintyConfig
+from dynactivegs.planning.paths import PathConfig
+from dynactivegs.planning.stage import PlanningConfig
+from dynactivegs.selection.stage import SelectionConfig
+from dynactivegs.sim.config import CameraConfig, CrowdConfig, RobotConfig, SimConfig
 
-
-
-@dataclass(frozen=True, slots=True)
-class CameraConfig:
-    """The robot's RGB-D camera."""
-
-    width_px: int = 160
-    """Image width in pixels."""
-    height_px: int = 92
-    """Image height in pixels."""
-    hfov_deg: float = 90.0
-    """Horizontal field of view in degrees (the paper: 90)."""
-    vfov_deg: float = 60.0
-    """Vertical field of view in degrees (the paper: 60)."""
-    height_m: float = 1.25
-    """Height of the optical centre above the floor in metres."""
-    min_depth_m: float = 0.1
-    """Returns nearer than this are reported as 0 (no return)."""
-    max_depth_m: float = 10.0
-    """Returns farther than this are reported as 0 (no return)."""
-    depth_noise_std_m: float = 0.0
-    """Standard deviation of additive depth noise, scaled by depth^2 / 1 m (Kinect-like); 0 turns it off."""
-
-    def __post_init__(self) -> None:
-        check_config(8 <= self.width_px <= 4096, "camera.width_px", self.width_px, "in [8, 4096]")
-        check_config(8 <= self.height_px <= 4096, "camera.height_px", self.height_px, "in [8, 4096]")
-        check_config(1.0 < self.hfov_deg < 179.0, "camera.hfov_deg", self.hfov_deg, "in (1, 179)")
-        check_config(1.0 < self.vfov_deg < 179.0, "camera.vfov_deg", self.vfov_deg, "in (1, 179)")
-        check_config(0.2 <= self.height_m <= 2.2, "camera.height_m", self.height_m, "in [0.2, 2.2] m")
-        check_config(0.0 < self.min_depth_m < self.max_depth_m, "camera.min_depth_m", self.min_depth_m,
-                 "positive and below camera.max_depth_m")
-        check_config(self.depth_noise_std_m >= 0.0, "camera.depth_noise_std_m", self.depth_noise_std_m, ">= 0")
-
-    @property
-    def fx(self) -> float:
-        return 0.5 * self.width_px / math.tan(math.radians(self.hfov_deg) / 2)
-
-    @property
-    def fy(self) -> float:
-        return 0.5 * self.height_px / math.tan(math.radians(self.vfov_deg) / 2)
-
-
-@dataclass(frozen=True, slots=True)
-class RobotConfig:
-    """The ground robot's body and discrete action set (Habitat-style)."""
-
-    forward_step_m: float = 0.25
-    """Distance of one forward action in metres."""
-    turn_step_deg: float = 10.0
-    """Angle of one turn action in degrees."""
-    radius_m: float = 0.18
-    """Collision radius of the robot's body in metres."""
-    body_height_m: float = 1.5
-    """Anything between 0.1 m above the floor and this height is an obstacle for the robot."""
-
-    def __post_init__(self) -> None:
-        check_config(0.01 <= self.forward_step_m <= 2.0, "robot.forward_step_m", self.forward_step_m, "in [0.01, 2] m")
-        check_config(0.5 <= self.turn_step_deg <= 90.0, "robot.turn_step_deg", self.turn_step_deg, "in [0.5, 90] deg")
-        check_config(0.05 <= self.radius_m <= 1.0, "robot.radius_m", self.radius_m, "in [0.05, 1] m")
-        check_config(0.3 <= self.body_height_m <= 2.5, "robot.body_height_m", self.body_height_m, "in [0.3, 2.5] m")
-
-
-@dataclass(frozen=True, slots=True)
-class CrowdConfig:
-    """Walking people and their ORCA collision avoidance."""
-
-    count: int = -1
-    """Number of people; -1 means max(1, floor(free floor area / area_per_person_m2))."""
-    area_per_person_m2: float = 8.0
-    """Floor area per person when count is -1 (the paper: 8 m^2)."""
-    speed_mps: float = 0.5
-    """Nominal walking speed; each person's is this times U(0.8, 1.2)."""
-    radius_m: float = 0.3
-    """Collision radius of a person in metres."""
-    min_goal_dist_m: float = 3.0
-    """A new goal is at least this far (straight line) from the person."""
-    neighbor_dist_m: float = 5.0
-    """ORCA: other agents farther than this are ignored."""
-    time_horizon_s: float = 2.0
-    """ORCA: time horizon for other agents."""
-    obstacle_time_horizon_s: float = 2.0
-    """ORCA: time horizon for static obstacles."""
-    substep_s: float = 0.1
-    """Crowd integration step; a simulator step is split into substeps of at most this length."""
-    stuck_timeout_s: float = 3.0
-    """A person whose remaining path stops shrinking for this long picks a new goal (breaks door jams)."""
-
-    def __post_init__(self) -> None:
-        check_config(self.count >= -1, "crowd.count", self.count, ">= 0, or -1 for the area rule")
-        check_config(self.area_per_person_m2 > 0, "crowd.area_per_person_m2", self.area_per_person_m2, "> 0")
-        check_config(0.0 < self.speed_mps <= 3.0, "crowd.speed_mps", self.speed_mps, "in (0, 3] m/s")
-        check_config(0.1 <= self.radius_m <= 0.6, "crowd.radius_m", self.radius_m, "in [0.1, 0.6] m")
-        check_config(self.min_goal_dist_m >= 0, "crowd.min_goal_dist_m", self.min_goal_dist_m, ">= 0")
-        check_config(self.neighbor_dist_m > 0, "crowd.neighbor_dist_m", self.neighbor_dist_m, "> 0")
-        check_config(self.time_horizon_s > 0, "crowd.time_horizon_s", self.time_horizon_s, "> 0")
-        check_config(self.obstacle_time_horizon_s > 0, "crowd.obstacle_time_horizon_s",
-                 self.obstacle_time_horizon_s, "> 0")
-        check_config(0.0 < self.substep_s <= 1.0, "crowd.substep_s", self.substep_s, "in (0, 1] s")
-        check_config(self.stuck_timeout_s > 0, "crowd.stuck_timeout_s", self.stuck_timeout_s, "> 0")
-
-
-@dataclass(frozen=True, slots=True)
-class SimConfig:
-    """The embedded simulator: scene, camera, robot, people, clock."""
-
-    scene: str = "apartment-00"
-    """A procedural scene name (tiny-NN, apartment-NN, house-NN) or a mesh file (.glb/.gltf/.ply/.obj)."""
-    mesh_up_axis: str = "auto"
-    """Up axis of a mesh file: auto (Y for .glb/.gltf, Z otherwise), or one of x, y, z, -x, -y, -z."""
-    mesh_floor_z_m: float = math.nan
-    """Floor height of a mesh file after up-axis conversion; NaN infers it from upward-facing area."""
-    mesh_scale: float = 1.0
-    """Multiplier applied to a mesh file's coordinates (0.001 for a file in millimetres)."""
-    grid_res_m: float = 0.05
-    """Cell size of the free-space grid in metres."""
-    dt_s: float = 0.5
-    """Simulated time per robot action in seconds."""
-    camera: CameraConfig = field(default_factory=CameraConfig)
-    robot: RobotConfig = field(default_factory=RobotConfig)
-    crowd: CrowdConfig = field(default_factory=CrowdConfig)
-
-    def __post_init__(self) -> None:
-        check_config(bool(self.scene), "sim.scene", self.scene, "a scene name or a mesh path")
-        check_config(self.mesh_up_axis in ("auto", "x", "y", "z", "-x", "-y", "-z"), "sim.mesh_up_axis",
-                 self.mesh_up_axis, "one of auto, x, y, z, -x, -y, -z")
-        check_config(0.0 < self.mesh_scale < 1e6, "sim.mesh_scale", self.mesh_scale, "positive")
-        check_config(0.01 <= self.grid_res_m <= 0.5, "sim.grid_res_m", self.grid_res_m, "in [0.01, 0.5] m")
-        check_config(0.01 <= self.dt_s <= 10.0, "sim.dt_s", self.dt_s, "in [0.01, 10] s")
+__all__ = ["CameraConfig", "CrowdConfig", "DagsConfig", "FeatureConfig", "FieldsConfig", "MappingConfig",
+           "PerceptionConfig", "PlanningConfig", "PRESETS", "RobotConfig", "SelectionConfig", "SimConfig",
+           "UncertaintyConfig", "preset", "to_json", "with_overrides"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -149,6 +34,94 @@ class DagsConfig:
     seed: int = 0
     """Master seed; every random choice in a run derives from it."""
     sim: SimConfig = field(default_factory=SimConfig)
+    perception: PerceptionConfig = field(default_factory=PerceptionConfig)
+    mapping: MappingConfig = field(default_factory=MappingConfig)
+    fields: FieldsConfig = field(default_factory=FieldsConfig)
+    selection: SelectionConfig = field(default_factory=SelectionConfig)
+    planning: PlanningConfig = field(default_factory=PlanningConfig)
 
     def __post_init__(self) -> None:
         check_config(0 <= self.seed < 2**63, "seed", self.seed, "in [0, 2^63)")
+
+
+def _preset(weighted: bool, selection: str, planner: str) -> DagsConfig:
+    return DagsConfig(mapping=MappingConfig(weighted=weighted), selection=SelectionConfig(variant=selection),
+                      planning=PlanningConfig(path=PathConfig(variant=planner)))
+
+
+PRESETS: dict[str, DagsConfig] = {
+    # the paper's component ablation (Table 3)
+    "baseline": _preset(False, "gain_cost", "shortest"),        # no weighted mapping, static-gain view selection
+    "weighted": _preset(True, "gain_cost", "shortest"),         # + uncertainty-weighted mapping
+    "motion_view": _preset(True, "full", "shortest"),           # + motion-aware view selection
+    "full": _preset(True, "full", "dyn_edge_temporal"),         # + motion-aware planning: the method
+    # classic nearest-frontier exploration with the method's mapping
+    "frontier": _preset(True, "frontier", "shortest"),
+    # view-selection variants (Table 4), the rest as in full
+    "sel_random": _preset(True, "random", "dyn_edge_temporal"),
+    "sel_static_gain": _preset(True, "static_gain", "dyn_edge_temporal"),
+    "sel_gain_cost": _preset(True, "gain_cost", "dyn_edge_temporal"),
+    # planner variants (Table 5), the rest as in full
+    "plan_shortest": _preset(True, "full", "shortest"),
+    "plan_dyn_edge": _preset(True, "full", "dyn_edge"),
+}
+
+
+def preset(name: str) -> DagsConfig:
+    """The named preset; a one-line error lists the names for an unknown one."""
+    if name not in PRESETS:
+        raise ConfigError(f"unknown preset {name!r}: use one of {', '.join(PRESETS)}")
+    return PRESETS[name]
+
+
+def _parse(value: str, current: object, key: str) -> object:
+    try:
+        if isinstance(current, bool):
+            if value.lower() in ("true", "1", "yes", "on"):
+                return True
+            if value.lower() in ("false", "0", "no", "off"):
+                return False
+            raise ValueError
+        if isinstance(current, int):
+            return int(value)
+        if isinstance(current, float):
+            return float(value)
+    except ValueError:
+        raise ConfigError(f"bad value for {key}: {value!r} is not a {type(current).__name__}") from None
+    if isinstance(current, str):
+        return value
+    raise ConfigError(f"{key} is a group, not a value; set one of its fields ({key}.<name>=...)")
+
+
+def with_overrides(cfg, overrides: list[str] | tuple[str, ...]):
+    """A copy of ``cfg`` with ``section.sub.field=value`` strings applied (values parsed by the field's type)."""
+    for item in overrides:
+        if "=" not in item:
+            raise ConfigError(f"bad override {item!r}: write key=value, e.g. mapping.weighted=false")
+        key, value = item.split("=", 1)
+        cfg = _set(cfg, key.strip().split("."), value.strip(), key.strip())
+    return cfg
+
+
+def _set(obj, path: list[str], value: str, key: str):
+    names = {f.name for f in dataclasses.fields(obj)}
+    if path[0] not in names:
+        raise ConfigError(f"unknown config key {key!r}: {type(obj).__name__} has {', '.join(sorted(names))}")
+    current = getattr(obj, path[0])
+    new = _set(current, path[1:], value, key) if len(path) > 1 else _parse(value, current, key)
+    if len(path) > 1 and not dataclasses.is_dataclass(current):
+        raise ConfigError(f"unknown config key {key!r}: {path[0]} has no fields")
+    return dataclasses.replace(obj, **{path[0]: new})
+
+
+def to_json(cfg) -> str:
+    """The resolved config as JSON (sorted keys; NaN as the string "nan")."""
+    def conv(x):
+        if dataclasses.is_dataclass(x):
+            return {f.name: conv(getattr(x, f.name)) for f in dataclasses.fields(x)}
+        if isinstance(x, float) and x != x:
+            return "nan"
+        if isinstance(x, (tuple, list)):
+            return [conv(v) for v in x]
+        return x
+    return json.dumps(conv(cfg), sort_keys=True)

@@ -57,110 +57,12 @@ from typing import Callable
 import numpy as np
 import torch
 
-from dynactivegs.errors import check_config
 from dynactivegs.mapping.adam import AdamState, adam_step
+from dynactivegs.mapping.config import MappingConfig
 from dynactivegs.records import Frame, MappingOut, StepRecord
 from dynactivegs.splat.gaussians import Gaussians
 from dynactivegs.splat.losses import isotropy, l1_map, ssim_map
 from dynactivegs.splat.render import render
-
-
-@dataclass(frozen=True, slots=True)
-class MappingConfig:
-    """The Gaussian map and its online optimisation."""
-
-    weighted: bool = True
-    """Weight the loss by 1 / beta^2 and never seed Gaussians from uncertain pixels (off: the 'no weighted mapping' ablation)."""
-    iters: int = 6
-    """Adam iterations per step."""
-    color_weight: float = 1.0
-    """l1: weight of L_color."""
-    depth_weight: float = 1.0
-    """l2: weight of L_depth (metres)."""
-    iso_weight: float = 10.0
-    """l3: weight of the isotropy regulariser L_iso (metres)."""
-    alpha_weight: float = 0.5
-    """l_a: weight of the silhouette term (1 - alpha) on pixels with a depth return."""
-    ssim_weight: float = 0.2
-    """Share of (1 - SSIM) in L_color."""
-    ref_percentile: float = 20.0
-    """The frame's reference beta b_ref is this percentile of its beta; weights are (b_ref / max(beta, b_ref))^2."""
-    seed_beta_ratio: float = 1.5
-    """With weighting on, pixels with beta above this times b_ref never seed new Gaussians."""
-    densify_stride: int = 2
-    """New Gaussians are seeded from every densify_stride-th pixel (both directions)."""
-    densify_alpha: float = 0.5
-    """Pixels where the render's accumulated opacity is below this get new Gaussians."""
-    densify_depth_rel: float = 0.1
-    """... and pixels observed in front of the map's surface by more than this fraction of their depth."""
-    init_opacity: float = 0.6
-    """Peak opacity of a new Gaussian."""
-    max_gaussians: int = 60_000
-    """Cap on the map's size; densification stops there."""
-    keyframe_every: int = 3
-    """Every k-th frame becomes a keyframe."""
-    window: int = 6
-    """Optimisation views come from the last this-many keyframes ..."""
-    random_older: int = 4
-    """... and this many random older keyframes (drawn anew each step)."""
-    prune_every: int = 5
-    """Prune every this-many steps."""
-    prune_opacity: float = 0.05
-    """Gaussians below this opacity are pruned."""
-    prune_scale_m: float = 0.5
-    """Gaussians whose largest standard deviation exceeds this (m) are pruned."""
-    carve_margin_m: float = 0.1
-    """Free-space carving: a Gaussian must lie this far (m) in front of the observed depth ..."""
-    carve_margin_rel: float = 0.05
-    """... plus this fraction of the depth, plus twice its largest scale, to be removed."""
-    surface_voxel_m: float = 0.15
-    """Edge of the voxels of MappingOut.surface_ijk."""
-    surface_opacity: float = 0.5
-    """Gaussians at least this opaque count as surface in MappingOut.surface_ijk."""
-    lr_means: float = 1e-3
-    """Adam learning rate of the centres (m)."""
-    lr_log_scales: float = 5e-3
-    """Adam learning rate of the log scales."""
-    lr_quats: float = 2e-3
-    """Adam learning rate of the (unnormalised) quaternions."""
-    lr_opacity: float = 5e-2
-    """Adam learning rate of the opacity logits."""
-    lr_sh0: float = 2e-2
-    """Adam learning rate of the colour coefficients."""
-    device: str = "cpu"
-    """cpu (the numba rasterizer) or cuda (gsplat; needs the [cuda] extra)."""
-
-    def __post_init__(self) -> None:
-        c = check_config
-        c(self.iters >= 0, "mapping.iters", self.iters, ">= 0")
-        for name in ("color_weight", "depth_weight", "iso_weight", "alpha_weight"):
-            c(getattr(self, name) >= 0, f"mapping.{name}", getattr(self, name), ">= 0")
-        c(0 <= self.ssim_weight <= 1, "mapping.ssim_weight", self.ssim_weight, "in [0, 1]")
-        c(0 <= self.ref_percentile <= 100, "mapping.ref_percentile", self.ref_percentile, "in [0, 100]")
-        c(self.seed_beta_ratio >= 1, "mapping.seed_beta_ratio", self.seed_beta_ratio, ">= 1")
-        c(1 <= self.densify_stride <= 16, "mapping.densify_stride", self.densify_stride, "in [1, 16]")
-        c(0 < self.densify_alpha <= 1, "mapping.densify_alpha", self.densify_alpha, "in (0, 1]")
-        c(self.densify_depth_rel > 0, "mapping.densify_depth_rel", self.densify_depth_rel, "> 0")
-        c(0 < self.init_opacity < 1, "mapping.init_opacity", self.init_opacity, "in (0, 1)")
-        c(self.max_gaussians >= 1, "mapping.max_gaussians", self.max_gaussians, ">= 1")
-        c(self.keyframe_every >= 1, "mapping.keyframe_every", self.keyframe_every, ">= 1")
-        c(self.window >= 1, "mapping.window", self.window, ">= 1")
-        c(self.random_older >= 0, "mapping.random_older", self.random_older, ">= 0")
-        c(self.prune_every >= 1, "mapping.prune_every", self.prune_every, ">= 1")
-        c(0 <= self.prune_opacity < 1, "mapping.prune_opacity", self.prune_opacity, "in [0, 1)")
-        c(self.prune_scale_m > 0, "mapping.prune_scale_m", self.prune_scale_m, "> 0")
-        c(self.carve_margin_m >= 0, "mapping.carve_margin_m", self.carve_margin_m, ">= 0")
-        c(self.carve_margin_rel >= 0, "mapping.carve_margin_rel", self.carve_margin_rel, ">= 0")
-        c(0.02 <= self.surface_voxel_m <= 2, "mapping.surface_voxel_m", self.surface_voxel_m, "in [0.02, 2] m")
-        c(0 < self.surface_opacity < 1, "mapping.surface_opacity", self.surface_opacity, "in (0, 1)")
-        for name in ("lr_means", "lr_log_scales", "lr_quats", "lr_opacity", "lr_sh0"):
-            c(getattr(self, name) > 0, f"mapping.{name}", getattr(self, name), "> 0")
-        c(self.device in ("cpu", "cuda"), "mapping.device", self.device, "cpu or cuda")
-
-    @property
-    def lrs(self) -> tuple[float, ...]:
-        """Learning rates in the order of :meth:`Gaussians.tensors`."""
-        return (self.lr_means, self.lr_log_scales, self.lr_quats, self.lr_opacity, self.lr_sh0)
 
 
 @dataclass(frozen=True, slots=True)

@@ -20,7 +20,7 @@ stride ``s``. Three backends:
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+
 from pathlib import Path
 from typing import Protocol
 
@@ -30,28 +30,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from dynactivegs.errors import ConfigError, DagsError
-
-BACKENDS = ("filters", "random_conv", "dinov2")
-
-
-@dataclass(frozen=True, slots=True)
-class FeatureConfig:
-    """Which feature extractor perception uses."""
-
-    backend: str = "filters"
-    """filters (built-in, default), random_conv (seeded random CNN) or dinov2 (local checkpoint)."""
-    stride: int = 4
-    """Output stride of the filter banks (the ViT's patch size sets it for dinov2)."""
-    checkpoint_dir: str = ""
-    """dinov2: a local directory holding a transformers checkpoint (config.json + model.safetensors)."""
-
-    def __post_init__(self) -> None:
-        if self.backend not in BACKENDS:
-            raise ConfigError(f"unknown feature backend {self.backend!r}: use one of {', '.join(BACKENDS)}")
-        if not 1 <= self.stride <= 32:
-            raise ConfigError(f"bad config value perception.features.stride={self.stride}: must be in [1, 32]")
-
+from dynactivegs.errors import DagsError
+from dynactivegs.perception.config import BACKENDS, FeatureConfig  # noqa: F401  (re-exported)
 
 class FeatureExtractor(Protocol):
     stride: int

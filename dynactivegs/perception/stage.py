@@ -15,24 +15,17 @@ mapping stage of the same step, which runs after it and consumes beta_t.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
 import torch
 
-from dynactivegs.perception.features import FeatureConfig, FeatureExtractor, make_extractor
-from dynactivegs.perception.uncertainty import (UncertaintyConfig, UncertaintyState, init_state as init_mlp,
+from dynactivegs.perception.config import FeatureConfig, PerceptionConfig, UncertaintyConfig  # noqa: F401
+from dynactivegs.perception.features import FeatureExtractor, make_extractor
+from dynactivegs.perception.uncertainty import (UncertaintyState, init_state as init_mlp,
                                                 predict, train, with_feature_stats)
 from dynactivegs.records import PerceptionOut, StepRecord
-
-
-@dataclass(frozen=True, slots=True)
-class PerceptionConfig:
-    """Features and the uncertainty predictor."""
-
-    features: FeatureConfig = field(default_factory=FeatureConfig)
-    uncertainty: UncertaintyConfig = field(default_factory=UncertaintyConfig)
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from dynactivegs.config import RobotConfig
+from dynactivegs.sim.config import RobotConfig
 from dynactivegs.errors import check_config
 from dynactivegs.records import RobotPose2D
 from dynactivegs.selection.occupancy import backproject

@@ -38,7 +38,7 @@ from scipy import ndimage, sparse
 from scipy.sparse import csgraph
 from scipy.spatial import cKDTree
 
-from dynactivegs.config import CrowdConfig
+from dynactivegs.sim.config import CrowdConfig
 from dynactivegs.errors import ConfigError
 from dynactivegs.sim.freespace import FreeSpace, grid_graph
 from dynactivegs.sim.humans import HumanLook, people_mesh, sample_look, stride_length_m

@@ -7,7 +7,7 @@ from enum import IntEnum
 
 import numpy as np
 
-from dynactivegs.config import RobotConfig
+from dynactivegs.sim.config import RobotConfig
 from dynactivegs.records import RobotPose2D
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dynactivegs.config import SimConfig
+from dynactivegs.sim.config import SimConfig
 from dynactivegs.errors import SceneError
 from dynactivegs.sim.freespace import FreeSpace, freespace_from_mesh
 from dynactivegs.sim.procedural import is_procedural_name, make_scene

@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from dynactivegs.config import SimConfig
+from dynactivegs.sim.config import SimConfig
 from dynactivegs.records import Frame, RobotPose2D, SimTruth
 from dynactivegs.rng import derive_rng
 from dynactivegs.sim.crowd import Crowd
