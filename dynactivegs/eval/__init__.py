@@ -1,1 +1,16 @@
-"""Evaluation: metrics, held-out views, benchmark tables and plots."""
+"""Evaluation: metrics, held-out views, benchmark tables and plots (DESIGN.md §6).
+
+- ``config.py``: :class:`EvalConfig`, every evaluation setting.
+- ``geometry.py``: ground-truth points (uniform over the static surface visible from free
+  space, cached on disk), Acc / Comp / C.R. with KD-trees, voxel downsampling.
+- ``recon.py``: reconstruction points of a Gaussian map, from opaque centres or from
+  back-projected renders; the result names the method.
+- ``views.py``: survey views and seeded held-out novel views away from the trajectory,
+  static-only ground-truth renders.
+- ``rendering.py``: PSNR, SSIM, depth L1 and (with local weights, ``lpips.py``) LPIPS.
+- ``progress.py``: 25/50/75/100 % checkpoints of a step budget, cheap coverage.
+- ``metrics.py``: :class:`SceneEvaluator` (per-scene state) and the :class:`Metrics` result.
+- ``classification.py``: AUROC of per-pixel scores.
+
+This package imports torch only through ``recon``, ``rendering``, ``lpips`` and ``metrics``.
+"""
