@@ -105,7 +105,8 @@ def load_lpips(path: str) -> tuple[LpipsAlex | None, str]:
     need = {k for k in model.state_dict() if k not in ("shift", "scale")}
     missing = sorted(need - set(mapped))
     if missing:
-        return None, f"LPIPS weights at {p} lack {len(missing)} tensors (e.g. {missing[0]}); expected the lpips AlexNet layout"
+        return None, (f"LPIPS weights at {p} lack {len(missing)} tensors (e.g. {missing[0]}); "
+                      "expected the lpips AlexNet layout")
     try:
         model.load_state_dict(mapped, strict=False)
     except RuntimeError:
