@@ -59,7 +59,7 @@ class CoverageProbe:
         return float(np.isfinite(d).mean() * 100.0)
 
     def of_gaussians(self, gaussians, opacity_min: float = 0.5) -> float:
-        """Coverage (%) by the centres of the Gaussians (:class:`~dynactivegs.splat.Gaussians`) above ``opacity_min``."""
+        """Coverage (%) by the centres of the Gaussians (a splat.Gaussians) above ``opacity_min``."""
         import torch
 
         with torch.no_grad():
