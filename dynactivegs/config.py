@@ -125,3 +125,71 @@ def to_json(cfg) -> str:
             return [conv(v) for v in x]
         return x
     return json.dumps(conv(cfg), sort_keys=True)
+
+
+def config_from_json(text: str, cls: type = DagsConfig):
+    """The config that :func:`to_json` wrote (nested dataclasses rebuilt); a one-line error for unknown keys.
+
+    Keys missing from the JSON keep their defaults, so a log written before a field was added
+    still loads; a key the dataclass does not have is an error naming it.
+    """
+    try:
+        data = json.loads(text)
+    except (TypeError, ValueError) as e:
+        raise ConfigError(f"config is not valid JSON: {str(e).splitlines()[0]}") from None
+    return _from_dict(cls, data, "")
+
+
+def _from_dict(cls: type, data: object, where: str):
+    import typing
+
+    if not isinstance(data, dict):
+        raise ConfigError(f"config {where or 'root'}: expected an object, found {type(data).__name__}")
+    hints = typing.get_type_hints(cls)
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - names)
+    if unknown:
+        raise ConfigError(f"unknown config key {where + unknown[0]!r}: {cls.__name__} has {', '.join(sorted(names))}")
+    kwargs = {}
+    for f in dataclasses.fields(cls):
+        if f.name not in data or not f.init:
+            continue
+        kwargs[f.name] = _value_from_json(hints[f.name], data[f.name], f"{where}{f.name}")
+    try:
+        return cls(**kwargs)
+    except TypeError as e:
+        raise ConfigError(f"config {where or 'root'}: {e}") from None
+
+
+def _value_from_json(hint: object, v: object, key: str):
+    import types
+    import typing
+
+    if dataclasses.is_dataclass(hint):
+        return _from_dict(hint, v, key + ".")
+    if typing.get_origin(hint) in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(hint) if a is not type(None)]
+        if v is None:
+            return None
+        return _value_from_json(args[0], v, key) if len(args) == 1 else v
+    if hint is float:
+        if isinstance(v, str) and v.lower() in ("nan", "inf", "-inf"):
+            return float(v)
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            return float(v)
+    elif hint is int:
+        if isinstance(v, int) and not isinstance(v, bool):
+            return v
+    elif hint is bool:
+        if isinstance(v, bool):
+            return v
+    elif hint is str:
+        if isinstance(v, str):
+            return v
+    elif typing.get_origin(hint) is tuple and isinstance(v, list):
+        args = typing.get_args(hint)
+        inner = args[0] if args else object
+        return tuple(_value_from_json(inner, x, key) for x in v)
+    else:
+        return v
+    raise ConfigError(f"config {key}: {v!r} is not a {getattr(hint, '__name__', hint)}")
