@@ -51,8 +51,10 @@ import numpy as np
 from dynactivegs import records
 from dynactivegs.errors import DagsError
 
-SCHEMA_VERSION = 1
-"""Version of the message encoding and of the record layouts. Bump it when a record's fields change."""
+SCHEMA_VERSION = 2
+"""Version of the message encoding and of the record layouts. Bump it when a record's fields change.
+
+2: ``/fields`` may hold a :func:`encode_fields_delta` message (``_t`` ``FieldsDelta``)."""
 
 MIN_SCHEMA_VERSION = 1
 """Oldest schema version this code still reads."""
@@ -450,3 +452,59 @@ def decode_state(data: bytes | memoryview, *, allowed_modules: Iterable[str] = D
     if m["_t"] != STATE_TYPE:
         raise _corrupt(f"state snapshot: message holds a {m['_t']!r}, not a state snapshot")
     return _unpack_any(m.get("value"), "state", tuple(allowed_modules), device)
+
+
+# ------------------------------------------------------------------------------ /fields deltas
+FIELDS_DELTA_TYPE = "FieldsDelta"
+"""``_t`` of a ``/fields`` message stored as the bitwise XOR against the previous step's ``FieldsOut``."""
+
+_GRIDS = ("u_s", "u_m", "n_obs", "visible")
+
+
+def fields_delta_applies(cur: records.FieldsOut, prev: records.FieldsOut | None) -> bool:
+    """Whether ``cur`` can be stored as a delta of ``prev``: the same grid (shape, origin, voxel size)."""
+    return (prev is not None and cur.u_s.shape == prev.u_s.shape and cur.voxel_m == prev.voxel_m
+            and np.array_equal(cur.origin_m, prev.origin_m))
+
+
+def _bits(a: np.ndarray) -> np.ndarray:
+    """The array's bytes reinterpreted as unsigned integers of the same width (bool -> uint8)."""
+    return np.ascontiguousarray(a).view({1: np.uint8, 4: np.uint32, 8: np.uint64}[a.dtype.itemsize])
+
+
+def encode_fields_delta(cur: records.FieldsOut, prev: records.FieldsOut) -> bytes:
+    """``cur`` as the XOR of each grid's bits with ``prev``'s (voxels out of view XOR to 0 and compress away).
+
+    Lossless: :func:`decode_fields_delta` with the same ``prev`` gives ``cur`` bit for bit.
+    """
+    assert fields_delta_applies(cur, prev)
+    body = {"origin_m": _pack_array(cur.origin_m), "voxel_m": float(cur.voxel_m)}
+    for name in _GRIDS:
+        body[name] = _pack_array(np.bitwise_xor(_bits(getattr(cur, name)), _bits(getattr(prev, name))))
+    return msgpack.packb({"_t": FIELDS_DELTA_TYPE, "_v": SCHEMA_VERSION, **body}, use_bin_type=True)
+
+
+def is_fields_delta(data: bytes | memoryview) -> bool:
+    return type_name(data) == FIELDS_DELTA_TYPE
+
+
+def decode_fields_delta(data: bytes | memoryview, prev: records.FieldsOut | None) -> records.FieldsOut:
+    """The FieldsOut stored in ``data`` as a delta against ``prev`` (the previous step's)."""
+    m = _envelope(data, "FieldsDelta")
+    if m["_t"] != FIELDS_DELTA_TYPE:
+        raise _corrupt(f"message holds a {m['_t']!r}, expected {FIELDS_DELTA_TYPE}")
+    if prev is None:
+        raise _corrupt("FieldsDelta: no previous /fields message to apply it to")
+    grids = {}
+    for name in _GRIDS:
+        base = getattr(prev, name)
+        x = _unpack_array(m.get(name), f"FieldsDelta.{name}")
+        if x.shape != base.shape or x.dtype != _bits(base).dtype:
+            raise _corrupt(f"FieldsDelta.{name}: {x.dtype} {x.shape} does not match the previous grid "
+                           f"{base.dtype} {base.shape}")
+        grids[name] = np.bitwise_xor(x, _bits(base)).view(base.dtype)
+    try:
+        return records.FieldsOut(origin_m=_unpack_array(m.get("origin_m"), "FieldsDelta.origin_m").copy(),
+                                 voxel_m=float(m["voxel_m"]), **grids)
+    except (ValueError, KeyError, TypeError) as e:
+        raise _corrupt(f"FieldsDelta: not a valid FieldsOut: {e}") from None

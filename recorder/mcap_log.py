@@ -32,7 +32,8 @@ from mcap.writer import CompressionType, Writer
 
 from dynactivegs import records
 from dynactivegs.errors import DagsError
-from recorder.codec import MESSAGE_ENCODING, SCHEMA_VERSION, Metrics, StepEnd, encode, encode_state
+from recorder.codec import (MESSAGE_ENCODING, SCHEMA_VERSION, Metrics, StepEnd, encode, encode_fields_delta,
+                           encode_state, fields_delta_applies)
 
 TOPICS: dict[str, type] = {
     "/frame": records.Frame,
@@ -46,6 +47,8 @@ TOPICS: dict[str, type] = {
     "/step_end": StepEnd,
 }
 """The record topics and the record type each carries. ``/truth`` is for evaluation and viewers only."""
+
+FIELDS_DELTA_NAME = "FieldsDelta"
 
 STATE_TOPIC_PREFIX = "/state/"
 """``/state/<stage>``: a state snapshot (:func:`recorder.codec.encode_state`) of that stage."""
@@ -65,6 +68,9 @@ END_METADATA_NAME = "dynactivegs.end"
 
 CHUNK_SIZE = 256 * 2 ** 20
 """Chunks close at step ends, not by size: a step larger than this is split (harmlessly) in two."""
+
+FIELDS_FULL_EVERY = 50
+"""``/fields`` is written whole at least every this many steps (and whenever the grid changes), else as a delta."""
 
 VERSIONED_PACKAGES = ("dynactivegs", "numpy", "scipy", "torch", "mcap", "msgpack", "zstandard", "rerun-sdk",
                       "gsplat", "trimesh", "networkx")
@@ -158,6 +164,8 @@ class LogWriter:
         self._sequence: dict[str, int] = {}
         self._step_topics: set[str] = set()
         self._closed = False
+        self._prev_fields: records.FieldsOut | None = None     # the last /fields written, the base of a delta
+        self._fields_since_full = 0
         self.steps_written = 0
         """Whole steps on disk."""
         self.last_step: int | None = None
@@ -210,6 +218,8 @@ class LogWriter:
             raise TypeError(f"stamp_ns must be a non-negative int; got {stamp_ns!r}")
         if topic in self._step_topics:
             raise ValueError(f"topic {topic} written twice in one step; end the step first")
+        if topic == "/fields" and type_name != FIELDS_DELTA_NAME:
+            self._prev_fields = None            # raw bytes written: the next /fields is written whole
         cid = self._channel(topic, type_name)
         seq = self._sequence[topic]
         self._sequence[topic] = seq + 1
@@ -224,7 +234,20 @@ class LogWriter:
             raise ValueError(f"unknown record topic {topic!r}; record topics are {sorted(TOPICS)}")
         if type(record) is not expected:
             raise TypeError(f"topic {topic} carries {expected.__name__}, not {type(record).__name__}")
+        if topic == "/fields":
+            self._write_fields(record, stamp_ns)        # type: ignore[arg-type]
+            return
         self.write_raw(topic, expected.__name__, encode(record), stamp_ns)
+
+    def _write_fields(self, rec: records.FieldsOut, stamp_ns: int) -> None:
+        """``/fields`` whole, or as a delta against the previous step's (docs/log_schema.md, FieldsDelta)."""
+        if fields_delta_applies(rec, self._prev_fields) and self._fields_since_full < FIELDS_FULL_EVERY - 1:
+            self.write_raw("/fields", FIELDS_DELTA_NAME, encode_fields_delta(rec, self._prev_fields), stamp_ns)
+            self._fields_since_full += 1
+        else:
+            self.write_raw("/fields", "FieldsOut", encode(rec), stamp_ns)
+            self._fields_since_full = 0
+        self._prev_fields = rec
 
     def write_step_record(self, rec: records.StepRecord, stamp_ns: int | None = None) -> None:
         """Write ``rec.frame`` and every stage output that is set (``prev_mapping`` is the previous step's)."""

@@ -24,7 +24,7 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 
 from dynactivegs import records
 from dynactivegs.errors import DagsError
-from recorder.codec import StepEnd, check_schema_version, decode, decode_state
+from recorder.codec import StepEnd, check_schema_version, decode, decode_fields_delta, decode_state, encode, type_name
 from recorder.mcap_log import END_METADATA_NAME, MAP_TOPIC, METADATA_NAME, STAGE_TOPICS, STATE_TOPIC_PREFIX, TOPICS
 
 _MAGIC = b"\x89MCAP0\r\n"
@@ -196,6 +196,7 @@ class LogReader:
         """
         channels: dict[int, str] = {}
         pending: dict[str, bytes] = {}
+        prev_fields: records.FieldsOut | None = None
         n_steps, last = 0, None
         complete = False
         for rec, pos in self._records():
@@ -222,8 +223,15 @@ class LogReader:
                                             f"its /step_end says {end.n_messages}")
                         group, pending = pending, {}
                         n_steps, last = n_steps + 1, end.step
+                        fields = None
+                        if "/fields" in group:
+                            fields, group["/fields"] = self._fields(group["/fields"], prev_fields, end.step)
+                            prev_fields = fields
                         if end.step >= start and (stop is None or end.step < stop):
-                            yield LoggedStep(end.step, end.stamp_ns, group, end_offset=pos)
+                            ls = LoggedStep(end.step, end.stamp_ns, group, end_offset=pos)
+                            if fields is not None:
+                                ls._decoded["/fields"] = fields
+                            yield ls
                         elif stop is not None and end.step >= stop:
                             return
             elif isinstance(rec, Metadata) and rec.name == END_METADATA_NAME:
@@ -231,6 +239,15 @@ class LogReader:
             elif isinstance(rec, Footer):
                 complete = True
         self.end = LogEnd(n_steps, last, complete, None if complete else self._cut)
+
+    def _fields(self, data: bytes, prev: records.FieldsOut | None, step: int) -> tuple[records.FieldsOut, bytes]:
+        """A step's ``/fields`` and its canonical (whole FieldsOut) bytes, resolving a FieldsDelta against ``prev``."""
+        if type_name(data) != "FieldsDelta":
+            return decode(data, records.FieldsOut), data
+        if prev is None:
+            raise DagsError(f"corrupt log {self.path}: step {step}'s /fields is a delta with no earlier /fields")
+        full = decode_fields_delta(data, prev)
+        return full, encode(full)
 
     def __iter__(self) -> Iterator[LoggedStep]:
         return self.steps()

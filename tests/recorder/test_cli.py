@@ -1,39 +1,74 @@
-"""dagsrun from the command line: writes the pictures a newcomer looks at; bad input is one line."""
+"""dagsrun from the command line: a closed-loop run with its summary and log; bad input is one line."""
 
 from __future__ import annotations
 
-import cv2
-import numpy as np
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
 
 from recorder.cli import main
+from replay.source import LogReader
+
+SMALL = ["--scene", "tiny-00", "--no-progress", "--set", "sim.camera.width_px=48", "sim.camera.height_px=28"]
 
 
-def test_dagsrun_writes_frames_contact_sheet_and_floorplan(tmp_path, capsys):
-    rc = main(["--scene", "tiny-00", "--steps", "6", "--out", str(tmp_path), "--no-progress",
-               "--sim.camera.width-px", "48", "--sim.camera.height-px", "28"])
+def test_dagsrun_runs_the_loop_and_prints_metrics_and_paths(tmp_path, capsys):
+    rc = main([*SMALL, "--steps", "6", "--out", str(tmp_path), "--record", str(tmp_path / "run.mcap"),
+               "--preset", "baseline", "--seed", "3"])
     assert rc == 0
-    for k in range(7):
-        rgb = cv2.imread(str(tmp_path / "frames" / f"rgb_{k:04d}.png"))
-        assert rgb is not None and rgb.shape == (28, 48, 3) and rgb.std() > 5
-        assert cv2.imread(str(tmp_path / "frames" / f"depth_{k:04d}.png")) is not None
-        assert cv2.imread(str(tmp_path / "frames" / f"people_{k:04d}.png"), cv2.IMREAD_UNCHANGED).dtype == np.uint8
-    plan = cv2.imread(str(tmp_path / "floorplan.png"))
-    assert plan is not None and plan.shape[0] > 200 and plan.std() > 10
-    assert cv2.imread(str(tmp_path / "contact_sheet.png")) is not None
     out = capsys.readouterr().out
-    assert "tiny-00: 6 steps" in out and "floor plan:" in out
+    assert "tiny-00: 6 steps in" in out and "Gaussians" in out and "m^2 of floor known" in out
+    assert "map: Acc" in out and "C.R." in out and "PSNR" in out
+    assert f"log:     {tmp_path / 'run.mcap'}" in out and "summary:" in out
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["steps"] == 6 and summary["config"]["seed"] == 3 and not summary["config"]["mapping"]["weighted"]
+    assert summary["map_metrics"]["cr_pct"] >= 0 and summary["last_step_metrics"]["n_gaussians"] > 0
+    reader = LogReader(tmp_path / "run.mcap")
+    assert len(reader.read_all()) == 6 and reader.end.complete and reader.metadata["preset"] == "baseline"
 
 
 def test_dagsrun_bad_input_is_one_line_exit_2(tmp_path, capsys):
+    import torch
+
     cases = [(["--scene", "castle-00"], "unknown scene"),
              (["--scene", str(tmp_path / "missing.glb")], "scene file not found"),
-             (["--sim.camera.width-px", "2"], "camera.width_px"),
+             (["--preset", "best"], "unknown preset 'best'"),
+             (["--set", "mapping.bogus=1"], "unknown config key 'mapping.bogus'"),
+             (["--set", "mapping.weighted=maybe"], "bad value for mapping.weighted"),
+             (["--set", "sim.camera.width_px=2"], "camera.width_px"),
              (["--steps", "0"], "--steps")]
+    if not torch.cuda.is_available():
+        cases.append((["--device", "cuda"], "--device cuda: no CUDA device"))
     for argv, phrase in cases:
-        rc = main(argv + ["--out", str(tmp_path), "--no-progress"])
+        rc = main(argv + ["--out", str(tmp_path), "--no-progress", "--no-eval", "--steps", argv[-1]
+                          if argv[0] == "--steps" else "2"] if argv[0] != "--steps" else
+                  argv + ["--out", str(tmp_path), "--no-progress", "--no-eval"])
         err = capsys.readouterr().err.strip()
         assert rc == 2, argv
         assert len(err.splitlines()) == 1 and phrase in err and err.startswith("dagsrun: error:"), err
+
+
+def test_ctrl_c_stops_after_a_whole_step_and_the_log_replays(tmp_path):
+    log = tmp_path / "run.mcap"
+    proc = subprocess.Popen([sys.executable, "-m", "recorder.cli", *SMALL, "--steps", "500", "--no-eval",
+                             "--record", str(log), "--out", str(tmp_path)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline and (not log.exists() or log.stat().st_size < 60_000):
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGINT)
+    out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "stopped by Ctrl-C after" in out
+    reader = LogReader(log)
+    steps = reader.read_all()
+    assert reader.end.complete and 0 < len(steps) < 500
+    from replay.cli import main as dagsreplay
+
+    assert dagsreplay([str(log), "--from-stage", "fields"]) == 0
 
 
 def test_every_console_script_resolves_to_a_callable():
