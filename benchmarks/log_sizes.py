@@ -2,9 +2,9 @@
 
     python benchmarks/log_sizes.py run.mcap
 
-For each topic: mean message bytes as stored (msgpack) and after zstd (level 3, the mcap
-writer's default, one message at a time, which is close to the per-step chunk), and the
-file's total bytes per step.
+For each topic: mean message bytes as stored (msgpack; ``/fields`` mostly as deltas) and
+after zstd (level 3, the mcap writer's default, one message at a time, close to its share
+of the per-step chunk), and the file's total bytes per step.
 """
 
 from __future__ import annotations
@@ -19,8 +19,6 @@ import zstandard
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from replay.source import LogReader  # noqa: E402
-
 
 def topic_sizes(path: Path) -> tuple[int, dict[str, tuple[float, float, int]]]:
     """(whole steps, {topic: (mean raw bytes, mean zstd bytes, messages)})."""
@@ -28,11 +26,24 @@ def topic_sizes(path: Path) -> tuple[int, dict[str, tuple[float, float, int]]]:
     comp: dict[str, list[int]] = defaultdict(list)
     z = zstandard.ZstdCompressor()
     n = 0
-    for ls in LogReader(path).steps():
-        n += 1
-        for topic, data in ls.raw.items():
-            raw[topic].append(len(data))
-            comp[topic].append(len(z.compress(data)))
+    from mcap.records import Channel, Chunk
+    from mcap.stream_reader import StreamReader, breakup_chunk
+
+    topics: dict[int, str] = {}
+    with open(path, "rb") as f:
+        for rec in StreamReader(f, emit_chunks=True).records:
+            if not isinstance(rec, Chunk):
+                continue
+            for r in breakup_chunk(rec):
+                if isinstance(r, Channel):
+                    topics[r.id] = r.topic
+                elif hasattr(r, "channel_id"):
+                    t = topics[r.channel_id]
+                    if t == "/step_end":
+                        n += 1
+                        continue
+                    raw[t].append(len(r.data))
+                    comp[t].append(len(z.compress(r.data)))
     return n, {t: (sum(raw[t]) / n, sum(comp[t]) / n, len(raw[t])) for t in sorted(raw)}
 
 
