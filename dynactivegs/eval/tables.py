@@ -1,0 +1,377 @@
+"""Benchmark tables (Markdown + CSV) and progress plots (PNG) from per-run metrics.
+
+Pure functions of the runs' metrics dicts as ``dagsbench`` writes them (one per run)::
+
+    {"preset": "full", "scene": "apartment-00", "seed": 0, "steps": 300,
+     "config": {...DagsConfig as JSON...},
+     "checkpoints": [{"fraction": 0.25, "step": 75, "acc_cm": ..., "comp_cm": ..., "cr_pct": ...,
+                      "psnr_db": ..., "ssim": ..., "depth_l1_cm": ..., "lpips": None, ...}, ...],
+     "coverage": [[step, percent], ...]}
+
+Aggregation: a cell is the mean +- sample standard deviation over seeds (std shown only
+with two or more seeds). A "Mean" column averages each seed's values over the scenes
+first, then gives mean +- std over seeds. "Best" compares the means of a column (lowest
+for Acc, Comp, depth L1, LPIPS; highest for C.R., PSNR, SSIM); ties are all best.
+
+The ablation tables follow the paper's Tables 3-5. Their rows are chosen by what a run's
+config switches on (weighted mapping, selection variant, planner variant), not by preset
+name, so e.g. ``motion_view`` and ``plan_shortest`` (the same config) fill the same row.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class MetricSpec:
+    key: str              # field of a checkpoint in the run's metrics
+    label: str
+    higher_is_better: bool
+    digits: int
+
+
+METRICS: tuple[MetricSpec, ...] = (
+    MetricSpec("acc_cm", "Acc (cm)", False, 2),
+    MetricSpec("comp_cm", "Comp (cm)", False, 2),
+    MetricSpec("cr_pct", "C.R. (%)", True, 1),
+    MetricSpec("psnr_db", "PSNR (dB)", True, 2),
+    MetricSpec("ssim", "SSIM", True, 3),
+    MetricSpec("lpips", "LPIPS", False, 3),
+    MetricSpec("depth_l1_cm", "Depth L1 (cm)", False, 2),
+)
+METRIC_BY_KEY = {m.key: m for m in METRICS}
+FRACTIONS = (0.25, 0.5, 0.75, 1.0)
+
+
+@dataclass(frozen=True)
+class Cell:
+    """mean +- std over ``n`` seeds (``mean`` None: not available, e.g. LPIPS without weights)."""
+
+    mean: float | None
+    std: float
+    n: int
+
+    def text(self, digits: int) -> str:
+        if self.mean is None:
+            return "n/a"
+        return f"{self.mean:.{digits}f}" + (f" ± {self.std:.{digits}f}" if self.n >= 2 else "")
+
+
+@dataclass(frozen=True)
+class Table:
+    """A table with a title; ``best[i][j]`` marks cells to set in bold; ``cells`` hold the numbers for CSV."""
+
+    title: str
+    header: tuple[str, ...]
+    rows: tuple[tuple[str, ...], ...]
+    best: tuple[tuple[bool, ...], ...]
+    records: tuple[dict[str, Any], ...]         # one per numeric cell: the CSV rows
+    note: str = ""
+    n_lead: int = 1                             # leading text columns (left-aligned)
+
+
+def _checkpoint(run: dict[str, Any], fraction: float) -> dict[str, Any]:
+    for c in run["checkpoints"]:
+        if math.isclose(c["fraction"], fraction):
+            return c
+    raise KeyError(f"run {run['preset']}/{run['scene']}/seed{run['seed']} has no checkpoint at {fraction:g}")
+
+
+def _value(run: dict[str, Any], key: str, fraction: float) -> float | None:
+    v = _checkpoint(run, fraction).get(key)
+    return None if v is None else float(v)
+
+
+def mean_std(values: Sequence[float]) -> Cell:
+    """Mean and sample standard deviation (ddof 1; 0 for a single value)."""
+    a = np.asarray(values, dtype=np.float64)
+    if a.size == 0:
+        return Cell(None, 0.0, 0)
+    return Cell(float(a.mean()), float(a.std(ddof=1)) if a.size >= 2 else 0.0, int(a.size))
+
+
+def cell(runs: Iterable[dict[str, Any]], key: str, fraction: float = 1.0) -> Cell:
+    """Mean +- std over the seeds of ``runs`` (one scene), of metric ``key`` at ``fraction`` of the budget."""
+    vals = [_value(r, key, fraction) for r in runs]
+    if any(v is None for v in vals):
+        return Cell(None, 0.0, len(vals))
+    return mean_std(vals)
+
+
+def mean_cell(runs: Iterable[dict[str, Any]], key: str, fraction: float = 1.0) -> Cell:
+    """Over scenes and seeds: each seed's mean over its scenes, then mean +- std over seeds."""
+    by_seed: dict[int, list[float | None]] = {}
+    for r in runs:
+        by_seed.setdefault(r["seed"], []).append(_value(r, key, fraction))
+    if not by_seed or any(v is None for vs in by_seed.values() for v in vs):
+        return Cell(None, 0.0, len(by_seed))
+    return mean_std([float(np.mean(vs)) for vs in by_seed.values()])   # type: ignore[arg-type]
+
+
+def _best_flags(cells: Sequence[Cell], higher: bool, digits: int) -> list[bool]:
+    """Best by the means as printed (rounded to ``digits``), so that equal-looking cells are all bold."""
+    means = [None if c.mean is None else round(c.mean, digits) for c in cells]
+    valid = [m for m in means if m is not None]
+    if len(valid) < 2:
+        return [False] * len(cells)
+    target = max(valid) if higher else min(valid)
+    return [m is not None and m == target for m in means]
+
+
+def _ordered(values: Iterable[str], order: Sequence[str] = ()) -> list[str]:
+    vs = list(dict.fromkeys(values))
+    return [v for v in order if v in vs] + sorted(v for v in vs if v not in order)
+
+
+def _dedupe(runs: Iterable[dict[str, Any]], key: Any) -> list[dict[str, Any]]:
+    """One run per (key(run), scene, seed): the first, so identical configs under two names count once."""
+    seen: set[Any] = set()
+    out = []
+    for r in runs:
+        k = (key(r), r["scene"], r["seed"])
+        if k not in seen:
+            seen.add(k)
+            out.append(r)
+    return out
+
+
+# ---------------------------------------------------------------------------------------- main table
+PRESET_ORDER = ("frontier", "baseline", "weighted", "motion_view", "full")
+
+
+def main_table(runs: Sequence[dict[str, Any]], metrics: Sequence[str] = ("acc_cm", "comp_cm", "cr_pct", "psnr_db",
+               "ssim", "lpips", "depth_l1_cm"), fraction: float = 1.0) -> Table:
+    """Rows = method x metric, columns = scenes + Mean; the best method per (metric, column) in bold."""
+    methods = _ordered((r["preset"] for r in runs), PRESET_ORDER)
+    scenes = _ordered(r["scene"] for r in runs)
+    header = ("Method", "Metric", *scenes, "Mean")
+    rows, best, records = [], [], []
+    for key in metrics:
+        spec = METRIC_BY_KEY[key]
+        grid = []                                   # [method][column] -> Cell
+        for m in methods:
+            mr = [r for r in runs if r["preset"] == m]
+            grid.append([cell([r for r in mr if r["scene"] == s], key, fraction) for s in scenes]
+                        + [mean_cell(mr, key, fraction)])
+        flags = [_best_flags([grid[i][j] for i in range(len(methods))], spec.higher_is_better, spec.digits)
+                 for j in range(len(scenes) + 1)]
+        for i, m in enumerate(methods):
+            rows.append((m, spec.label, *(c.text(spec.digits) for c in grid[i])))
+            best.append((False, False, *(flags[j][i] for j in range(len(scenes) + 1))))
+            for j, col in enumerate((*scenes, "mean")):
+                c = grid[i][j]
+                records.append({"method": m, "metric": key, "scene": col, "mean": c.mean, "std": c.std,
+                                "n_seeds": c.n, "best": flags[j][i]})
+    n_seeds = len({r["seed"] for r in runs})
+    steps = sorted({r["steps"] for r in runs})
+    note = (f"{len(runs)} runs; {n_seeds} seed(s); metrics at {fraction:.0%} of a budget of "
+            f"{'/'.join(map(str, steps))} steps; mean ± std over seeds; best in bold.")
+    return Table(f"Main results ({fraction:.0%} of the budget)", header, tuple(rows), tuple(best), tuple(records), note,
+                 n_lead=2)
+
+
+# ---------------------------------------------------------------------------------------- ablations
+def switches(run: dict[str, Any]) -> tuple[bool, str, str]:
+    """(weighted mapping, selection variant, planner variant) of a run's config."""
+    c = run["config"]
+    return bool(c["mapping"]["weighted"]), str(c["selection"]["variant"]), str(c["planning"]["path"]["variant"])
+
+
+COMPONENT_ROWS: tuple[tuple[str, tuple[bool, str, str]], ...] = (
+    ("baseline", (False, "gain_cost", "shortest")),
+    ("weighted", (True, "gain_cost", "shortest")),
+    ("motion_view", (True, "full", "shortest")),
+    ("full", (True, "full", "dyn_edge_temporal")),
+)
+SELECTION_ROWS: tuple[tuple[str, tuple[bool, str, str]], ...] = (
+    ("random", (True, "random", "dyn_edge_temporal")),
+    ("static gain", (True, "static_gain", "dyn_edge_temporal")),
+    ("gain + cost", (True, "gain_cost", "dyn_edge_temporal")),
+    ("full (motion-aware)", (True, "full", "dyn_edge_temporal")),
+)
+PLANNER_ROWS: tuple[tuple[str, tuple[bool, str, str]], ...] = (
+    ("shortest", (True, "full", "shortest")),
+    ("dyn_edge", (True, "full", "dyn_edge")),
+    ("dyn_edge_temporal (full)", (True, "full", "dyn_edge_temporal")),
+)
+ABLATION_METRICS = ("acc_cm", "comp_cm", "cr_pct", "psnr_db", "ssim", "depth_l1_cm")
+PLANNER_METRICS = ("cr_pct", "acc_cm", "psnr_db")
+
+
+def _ablation(title: str, rows_def: Sequence[tuple[str, tuple[bool, str, str]]], runs: Sequence[dict[str, Any]],
+              columns: Sequence[tuple[str, str, float]], lead: tuple[str, ...], lead_of: Any) -> Table | None:
+    """Rows present in ``runs`` (by switches); ``columns`` = (header, metric key, fraction); None if < 2 rows."""
+    runs = _dedupe(runs, switches)
+    present = [(label, sw) for label, sw in rows_def if any(switches(r) == sw for r in runs)]
+    if len(present) < 2:
+        return None
+    grid = [[mean_cell([r for r in runs if switches(r) == sw], key, frac) for _, key, frac in columns]
+            for _, sw in present]
+    flags = [_best_flags([grid[i][j] for i in range(len(present))], METRIC_BY_KEY[key].higher_is_better,
+                         METRIC_BY_KEY[key].digits)
+             for j, (_, key, _) in enumerate(columns)]
+    rows, best, records = [], [], []
+    for i, (label, sw) in enumerate(present):
+        rows.append((label, *lead_of(sw), *(grid[i][j].text(METRIC_BY_KEY[key].digits)
+                                            for j, (_, key, _) in enumerate(columns))))
+        best.append((False,) * (1 + len(lead)) + tuple(flags[j][i] for j in range(len(columns))))
+        for j, (_, key, frac) in enumerate(columns):
+            c = grid[i][j]
+            records.append({"row": label, "metric": key, "fraction": frac, "mean": c.mean, "std": c.std,
+                            "n_seeds": c.n, "best": flags[j][i]})
+    scenes = sorted({r["scene"] for r in runs if any(switches(r) == sw for _, sw in present)})
+    note = f"Mean over scenes ({', '.join(scenes)}), then mean ± std over seeds; best in bold."
+    header = ("Variant", *lead, *(h for h, _, _ in columns))
+    return Table(title, header, tuple(rows), tuple(best), tuple(records), note, n_lead=1 + len(lead))
+
+
+def _tick(flag: bool) -> str:
+    return "✓" if flag else "✗"
+
+
+def components_table(runs: Sequence[dict[str, Any]], fraction: float = 1.0) -> Table | None:
+    """The paper's Table 3: which of weighted mapping / motion-aware view / motion-aware planning is on."""
+    cols = [(METRIC_BY_KEY[k].label, k, fraction) for k in ABLATION_METRICS]
+    return _ablation("Ablation: components (Table 3 layout)", COMPONENT_ROWS, runs, cols,
+                     ("Weighted mapping", "Motion-aware view", "Motion-aware planning"),
+                     lambda sw: (_tick(sw[0]), _tick(sw[1] == "full"), _tick(sw[2] != "shortest")))
+
+
+def selection_table(runs: Sequence[dict[str, Any]], fraction: float = 1.0) -> Table | None:
+    """The paper's Table 4: view-selection variants (weighted mapping, dyn_edge_temporal planner)."""
+    cols = [(METRIC_BY_KEY[k].label, k, fraction) for k in ABLATION_METRICS]
+    return _ablation("Ablation: view selection (Table 4 layout)", SELECTION_ROWS, runs, cols, (), lambda sw: ())
+
+
+def planner_table(runs: Sequence[dict[str, Any]]) -> Table | None:
+    """The paper's Table 5: planner variants, metrics at 25/50/75/100 % path ratio (fraction of the budget)."""
+    cols = [(f"{METRIC_BY_KEY[k].label} @{f:.0%}", k, f) for k in PLANNER_METRICS for f in FRACTIONS]
+    return _ablation("Ablation: planner (Table 5 layout)", PLANNER_ROWS, runs, cols, (), lambda sw: ())
+
+
+# ---------------------------------------------------------------------------------------- output
+def to_markdown(t: Table) -> str:
+    """The table as GitHub Markdown, best cells in bold, with its title and note."""
+    def fmt(text: str, bold: bool) -> str:
+        return f"**{text}**" if bold else text
+
+    lines = [f"### {t.title}", "", "| " + " | ".join(t.header) + " |",
+             "|" + "|".join("---" if i < t.n_lead else "---:" for i in range(len(t.header))) + "|"]
+    for row, flags in zip(t.rows, t.best):
+        lines.append("| " + " | ".join(fmt(x, b) for x, b in zip(row, flags)) + " |")
+    if t.note:
+        lines += ["", t.note]
+    return "\n".join(lines) + "\n"
+
+
+def to_csv(t: Table) -> str:
+    """One line per numeric cell (long format): the cell's keys, mean, std, seeds, best."""
+    if not t.records:
+        return ""
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(t.records[0]), lineterminator="\n")
+    w.writeheader()
+    for r in t.records:
+        w.writerow({k: ("" if v is None else v) for k, v in r.items()})
+    return buf.getvalue()
+
+
+def progress_series(runs: Sequence[dict[str, Any]], key: str) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Per method: (checkpoint steps, mean, std) of metric ``key`` over scenes and seeds (None values dropped)."""
+    out = {}
+    for m in _ordered((r["preset"] for r in runs), PRESET_ORDER):
+        mr = [r for r in runs if r["preset"] == m]
+        steps, means, stds = [], [], []
+        for f in FRACTIONS:
+            vals = [v for r in mr if (v := _value(r, key, f)) is not None]
+            if vals:
+                steps.append(float(np.mean([_checkpoint(r, f)["step"] for r in mr])))
+                means.append(float(np.mean(vals)))
+                stds.append(float(np.std(vals, ddof=1)) if len(vals) > 1 else 0.0)
+        out[m] = (np.array(steps), np.array(means), np.array(stds))
+    return out
+
+
+def coverage_series(runs: Sequence[dict[str, Any]]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Per method: (steps, mean coverage %) over its runs, on the steps every run of it measured."""
+    out = {}
+    for m in _ordered((r["preset"] for r in runs), PRESET_ORDER):
+        curves = [dict((int(s), float(c)) for s, c in r["coverage"]) for r in runs if r["preset"] == m]
+        common = sorted(set.intersection(*(set(c) for c in curves))) if curves else []
+        out[m] = (np.array(common, dtype=np.float64), np.array([np.mean([c[s] for c in curves]) for s in common]))
+    return out
+
+
+def plot_progress(runs: Sequence[dict[str, Any]], path: Path) -> Path:
+    """PSNR and C.R. over steps (the checkpoints), one line per method, +- std band; saved as PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for ax, key in zip(axes, ("psnr_db", "cr_pct")):
+        for m, (x, y, s) in progress_series(runs, key).items():
+            if len(x):
+                ax.plot(x, y, marker="o", label=m)
+                ax.fill_between(x, y - s, y + s, alpha=0.15)
+        ax.set_xlabel("step")
+        ax.set_ylabel(METRIC_BY_KEY[key].label)
+        ax.grid(alpha=0.3)
+    axes[0].legend()
+    fig.suptitle("Progress at 25/50/75/100 % of the budget (mean over scenes and seeds)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def plot_coverage(runs: Sequence[dict[str, Any]], path: Path) -> Path:
+    """Cheap coverage (% of probe GT points near an opaque Gaussian centre) over steps, per method; PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for m, (x, y) in coverage_series(runs).items():
+        if len(x):
+            ax.plot(x, y, label=m)
+    ax.set_xlabel("step")
+    ax.set_ylabel("coverage (%)")
+    ax.set_title("Coverage by Gaussian centres (mean over scenes and seeds)")
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def write_reports(runs: Sequence[dict[str, Any]], out_dir: Path) -> list[Path]:
+    """Write every table that the runs allow (Markdown + CSV) and the plots into ``out_dir``; the paths written."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    if not runs:
+        return []
+    tables = {"main": main_table(runs), "ablation_components": components_table(runs),
+              "ablation_selection": selection_table(runs), "ablation_planner": planner_table(runs)}
+    written = []
+    for name, t in tables.items():
+        if t is None:
+            continue
+        for suffix, text in ((".md", to_markdown(t)), (".csv", to_csv(t))):
+            p = out_dir / f"{name}{suffix}"
+            p.write_text(text)
+            written.append(p)
+    written.append(plot_progress(runs, out_dir / "progress.png"))
+    written.append(plot_coverage(runs, out_dir / "coverage.png"))
+    return written

@@ -1,0 +1,379 @@
+"""``dagsbench``: presets x scenes x seeds, each run measured at 25/50/75/100 % of its step budget.
+
+Every run is independent: it builds its config (preset, scene, seed, ``--set`` overrides),
+runs the closed loop with an MCAP sink (unless ``--no-mcap``), snapshots the Gaussian map at
+the checkpoints of :func:`dynactivegs.eval.progress.checkpoint_steps`, measures a cheap
+coverage every few steps, and after the loop evaluates the snapshots with
+:class:`dynactivegs.eval.metrics.SceneEvaluator`. The held-out views avoid the run's whole
+trajectory, so every checkpoint of a run is measured on the same views.
+
+Layout of ``--out``::
+
+    runs/<preset>/<scene>-seed<k>.json    metrics at the checkpoints, coverage curve, timing, config
+    runs/<preset>/<scene>-seed<k>.mcap    the run's log (dagsreplay reads it)
+    main.md / main.csv                    methods x metrics, scenes + mean (best in bold)
+    ablation_components.md/.csv           Table 3 layout (which components are on)
+    ablation_selection.md/.csv            Table 4 layout (view-selection variants)
+    ablation_planner.md/.csv              Table 5 layout (planner variants at 25-100 % path ratio)
+    progress.png, coverage.png            PSNR and C.R. over steps; coverage over steps, per method
+
+A run whose metrics file exists is skipped, so an interrupted sweep resumes where it stopped.
+Runs go to a local process pool (``--workers``) or to Ray tasks (``--ray ADDRESS``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator
+
+from dynactivegs.config import DagsConfig, PRESETS, preset, to_json, with_overrides
+from dynactivegs.errors import DagsError
+
+SUITES: dict[str, tuple[str, ...]] = {
+    "tiny": ("tiny-00", "tiny-01"),
+    "apartment": tuple(f"apartment-{i:02d}" for i in range(4)),
+    "house": tuple(f"house-{i:02d}" for i in range(4)),
+}
+"""Named scene suites of ``--suite``."""
+
+COVERAGE_POINTS_PER_RUN = 50
+"""The cheap coverage is measured about this many times per run (every ``steps // 50`` steps, and the last)."""
+
+RESULT_VERSION = 1
+"""Version of the per-run metrics file."""
+
+
+@dataclass(frozen=True, slots=True)
+class RunSpec:
+    """One run of the sweep: what to run and where its files go."""
+
+    preset: str
+    scene: str
+    seed: int
+    steps: int
+    overrides: tuple[str, ...]          # DagsConfig key=value, applied after preset, scene and seed
+    eval_overrides: tuple[str, ...]     # EvalConfig key=value (given as eval.key=value on the command line)
+    out_dir: str
+    mcap: bool = True
+    device: str | None = None           # mapping.device; None: the preset's
+
+    @property
+    def name(self) -> str:
+        return f"{self.preset}/{self.scene}/seed{self.seed}"
+
+    @property
+    def stem(self) -> Path:
+        return Path(self.out_dir) / "runs" / self.preset / f"{self.scene}-seed{self.seed}"
+
+    @property
+    def metrics_path(self) -> Path:
+        return self.stem.with_suffix(".json")
+
+    @property
+    def mcap_path(self) -> Path:
+        return self.stem.with_suffix(".mcap")
+
+    def config(self) -> DagsConfig:
+        cfg = with_overrides(preset(self.preset), [f"sim.scene={self.scene}", f"seed={self.seed}"])
+        if self.device is not None:
+            cfg = with_overrides(cfg, [f"mapping.device={self.device}"])
+        return with_overrides(cfg, list(self.overrides))
+
+    def eval_config(self) -> Any:
+        from dynactivegs.eval.config import EvalConfig
+
+        return with_overrides(EvalConfig(), list(self.eval_overrides))
+
+
+def parse_list(text: str, what: str) -> list[str]:
+    items = [s.strip() for s in text.split(",") if s.strip()]
+    if not items:
+        raise DagsError(f"bad value for --{what}: {text!r} is empty")
+    return items
+
+
+def resolve_scenes(suite: str) -> list[str]:
+    """A suite name (tiny, apartment, house) or a comma list of scene names; unknown scenes fail in one line."""
+    from dynactivegs.sim.config import SimConfig
+    from dynactivegs.sim.scenes import load_scene
+
+    scenes = list(SUITES[suite]) if suite in SUITES else parse_list(suite, "suite")
+    for s in scenes:
+        if s in SUITES:
+            raise DagsError(f"bad --suite {suite!r}: a suite name ({', '.join(SUITES)}) cannot be in a list")
+        load_scene(SimConfig(scene=s))   # one-line SceneError for an unknown name or missing file
+    return scenes
+
+
+def plan_runs(presets: list[str], scenes: list[str], seeds: list[int], steps: int, overrides: list[str],
+              out_dir: Path, *, mcap: bool = True, device: str | None = None) -> list[RunSpec]:
+    """Every (preset, scene, seed) run, configs checked up front (bad names and overrides fail in one line)."""
+    if steps < 1:
+        raise DagsError(f"bad value --steps {steps}: must be >= 1")
+    for p in presets:
+        preset(p)
+    dags_ov = tuple(kv for kv in overrides if not kv.startswith("eval."))
+    eval_ov = tuple(kv[len("eval."):] for kv in overrides if kv.startswith("eval."))
+    specs = [RunSpec(p, s, k, steps, dags_ov, eval_ov, str(out_dir), mcap, device)
+             for p in presets for s in scenes for k in seeds]
+    for spec in specs[:1]:
+        spec.config()
+        spec.eval_config()
+    return specs
+
+
+def check_finished(spec: RunSpec) -> bool:
+    """True when the run's metrics file exists; a one-line error when it was made with other settings."""
+    if not spec.metrics_path.is_file():
+        return False
+    done = json.loads(spec.metrics_path.read_text())
+    if done.get("steps") != spec.steps or done.get("config") != json.loads(to_json(spec.config())):
+        raise DagsError(f"{spec.metrics_path} was run with other settings (steps or config); use another --out")
+    return True
+
+
+# ---------------------------------------------------------------------------------------- one run
+class _ProgressSink:
+    """Snapshots the map at the checkpoint step counts and measures coverage every ``every`` steps."""
+
+    def __init__(self, checkpoints: tuple[int, ...], probe: Any, every: int, last: int) -> None:
+        self.checkpoints = set(checkpoints)
+        self.probe = probe
+        self.every = every
+        self.last = last
+        self.snapshots: dict[int, Any] = {}
+        self.coverage: list[tuple[int, float]] = []
+
+    def on_step(self, rec: Any, truth: Any, states: list[object], metrics: dict[str, float]) -> None:
+        done = rec.frame.step + 1                     # steps taken so far
+        g = states[1].gaussians
+        if done in self.checkpoints:
+            from dynactivegs.splat.gaussians import Gaussians
+
+            self.snapshots[done] = Gaussians(*(t.detach().clone() for t in g.tensors()))
+        if done % self.every == 0 or done == self.last or done == 1:
+            self.coverage.append((done, self.probe.of_gaussians(g)))
+
+
+@dataclass
+class _Fanout:
+    sinks: list[Any]
+
+    def on_step(self, rec: Any, truth: Any, states: list[object], metrics: dict[str, float]) -> None:
+        for s in self.sinks:
+            s.on_step(rec, truth, states, metrics)
+
+
+def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
+    """Run ``spec``, evaluate it at its checkpoints and write its metrics file (atomically); returns its contents."""
+    from dynactivegs import pipeline
+    from dynactivegs.eval.metrics import SceneEvaluator
+    from dynactivegs.eval.progress import CHECKPOINT_FRACTIONS, checkpoint_steps
+
+    if torch_threads is not None:
+        import torch
+
+        torch.set_num_threads(torch_threads)
+    cfg, ecfg = spec.config(), spec.eval_config()
+    spec.stem.parent.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    evaluator = SceneEvaluator(cfg.sim, ecfg)
+    t_setup = time.perf_counter() - t0
+    checkpoints = checkpoint_steps(spec.steps)
+    progress = _ProgressSink(checkpoints, evaluator.coverage_probe(),
+                             max(1, spec.steps // COVERAGE_POINTS_PER_RUN), spec.steps)
+    sinks: list[Any] = [progress]
+    writer = None
+    if spec.mcap:
+        from recorder.live import McapSink
+        from recorder.mcap_log import LogWriter, run_metadata
+
+        writer = LogWriter(spec.mcap_path, run_metadata(cfg, cfg.seed, steps_requested=str(spec.steps),
+                                                        preset=spec.preset))
+        sinks.append(McapSink(writer, last_step=spec.steps - 1))
+    t1 = time.perf_counter()
+    try:
+        res = pipeline.run(cfg, spec.steps, sink=_Fanout(sinks))
+    except BaseException:
+        if writer is not None:
+            writer.abort()
+        raise
+    t_run = time.perf_counter() - t1
+    if writer is not None:
+        writer.close({"interrupted": "false", "seconds": f"{t_run:.3f}"})
+    t2 = time.perf_counter()
+    rows = []
+    for frac, step in zip(CHECKPOINT_FRACTIONS, checkpoints):
+        m = evaluator.evaluate(progress.snapshots[step], step=step, trajectory_xy_m=res.trajectory_xy_m)
+        rows.append({"fraction": frac, "n_gaussians": len(progress.snapshots[step]), **dataclasses.asdict(m)})
+    result = {
+        "version": RESULT_VERSION, "preset": spec.preset, "scene": spec.scene, "seed": spec.seed,
+        "steps": spec.steps, "overrides": list(spec.overrides), "eval_overrides": list(spec.eval_overrides),
+        "config": json.loads(to_json(cfg)), "eval_config": json.loads(to_json(ecfg)),
+        "checkpoints": rows, "coverage": [[s, c] for s, c in progress.coverage],
+        "coverage_note": f"% of {len(evaluator.coverage_probe().points_m)} ground-truth points within "
+                         f"{ecfg.cr_threshold_cm:g} cm of an opaque Gaussian centre",
+        "seconds_per_step": res.seconds_per_step, "seconds_run": t_run, "seconds_eval": time.perf_counter() - t2,
+        "seconds_setup": t_setup, "collisions": res.collisions,
+        "mcap": spec.mcap_path.name if spec.mcap else None,
+    }
+    tmp = spec.metrics_path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(result, indent=1))
+    os.replace(tmp, spec.metrics_path)
+    return result
+
+
+def _worker(spec: RunSpec, torch_threads: int | None) -> dict[str, Any]:
+    return run_one(spec, torch_threads)
+
+
+# ---------------------------------------------------------------------------------------- the sweep
+def run_local(specs: list[RunSpec], workers: int) -> Iterator[dict[str, Any]]:
+    """Results of ``specs`` as they finish, on ``workers`` processes (in this process when 1)."""
+    if workers <= 1:
+        for spec in specs:
+            yield run_one(spec)
+        return
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
+        futures = [pool.submit(_worker, spec, 1) for spec in specs]
+        for f in as_completed(futures):
+            yield f.result()
+
+
+def run_ray(specs: list[RunSpec], address: str, gpu: bool) -> Iterator[dict[str, Any]]:
+    """Results of ``specs`` as they finish, as Ray tasks of one CPU (or one GPU) each on the cluster at ``address``.
+
+    ``address``: ``local`` starts a local instance; ``auto`` or ``host:port`` joins a running
+    cluster. Ray schedules the tasks; each sets torch to one thread.
+    """
+    try:
+        import ray
+    except ImportError as e:
+        raise DagsError(f"--ray needs Ray: pip install 'dynactivegs[ray]' ({e})") from None
+    started = not ray.is_initialized()
+    if started:
+        ray.init(address=address, include_dashboard=False, log_to_driver=False)
+    try:
+        task = ray.remote(_worker).options(num_gpus=1) if gpu else ray.remote(_worker).options(num_cpus=1)
+        pending = [task.remote(spec, 1) for spec in specs]
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            yield ray.get(done[0])
+    finally:
+        if started:
+            ray.shutdown()
+
+
+def sweep(specs: list[RunSpec], *, workers: int = 1, ray_address: str | None = None, gpu: bool = False,
+          progress: bool = True) -> tuple[list[RunSpec], list[dict[str, Any]]]:
+    """Run the unfinished ``specs``; returns (the skipped ones, the new results)."""
+    todo = [s for s in specs if not check_finished(s)]
+    skipped = [s for s in specs if s not in todo]
+    results: list[dict[str, Any]] = []
+    if not todo:
+        return skipped, results
+    from tqdm import tqdm
+
+    bar = tqdm(total=len(todo), desc="runs", unit="run", disable=not progress, dynamic_ncols=True)
+    stream = run_ray(todo, ray_address, gpu) if ray_address else run_local(todo, workers)
+    try:
+        for r in stream:
+            results.append(r)
+            last = r["checkpoints"][-1]
+            bar.set_postfix_str(f"{r['preset']}/{r['scene']}/seed{r['seed']}: C.R. {last['cr_pct']:.1f} %, "
+                                f"PSNR {last['psnr_db']:.2f} dB", refresh=False)
+            bar.update(1)
+    finally:
+        bar.close()
+    return skipped, results
+
+
+def load_results(out_dir: Path) -> list[dict[str, Any]]:
+    """Every finished run's metrics under ``out_dir/runs``."""
+    return [json.loads(p.read_text()) for p in sorted((out_dir / "runs").glob("*/*.json"))]
+
+
+# ---------------------------------------------------------------------------------------- CLI
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="dagsbench", description="Run presets x scenes x seeds, measure every run at "
+                                "25/50/75/100 %% of its budget, write the paper-style tables and plots.")
+    p.add_argument("--presets", default="baseline,weighted,motion_view,full,frontier",
+                   help=f"comma list of {', '.join(PRESETS)} (default: baseline,weighted,motion_view,full,frontier)")
+    p.add_argument("--suite", default="apartment",
+                   help=f"{', '.join(f'{k} ({v[0]}..{v[-1]})' for k, v in SUITES.items())} or a comma list of scenes")
+    p.add_argument("--seeds", default="0,1,2", help="comma list of master seeds (default: 0,1,2)")
+    p.add_argument("--steps", type=int, default=1000, help="step budget of every run (default: 1000)")
+    p.add_argument("--out", type=Path, required=True, help="results directory, e.g. benchmarks/results/apartment")
+    p.add_argument("--workers", type=int, help="local processes (default: 1, or half the cores when there are 4+)")
+    p.add_argument("--ray", metavar="ADDRESS", help="run on Ray: 'local' starts one, 'auto' or host:port joins one")
+    p.add_argument("--device", choices=("cpu", "cuda"), help="where mapping runs (sets mapping.device); with --ray "
+                   "cuda, each task asks for one GPU")
+    p.add_argument("--set", dest="overrides", action="append", default=[], nargs="+", metavar="KEY=VALUE",
+                   help="config overrides for every run, e.g. sim.camera.width_px=64; eval.KEY=VALUE sets the "
+                   "evaluation (e.g. eval.n_views=20)")
+    p.add_argument("--no-mcap", dest="mcap", action="store_false", help="do not save the runs' MCAP logs")
+    p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
+    return p
+
+
+def default_workers() -> int:
+    cores = os.cpu_count() or 1
+    return max(1, cores // 2) if cores >= 4 else 1
+
+
+def run(args: argparse.Namespace) -> int:
+    presets = parse_list(args.presets, "presets")
+    for p in presets:
+        preset(p)                           # an unknown name fails before any scene is built
+    try:
+        seeds = [int(s) for s in parse_list(args.seeds, "seeds")]
+    except ValueError:
+        raise DagsError(f"bad value for --seeds: {args.seeds!r}; write integers, e.g. 0,1,2") from None
+    scenes = resolve_scenes(args.suite)
+    workers = args.workers if args.workers is not None else default_workers()
+    if workers < 1:
+        raise DagsError(f"bad value --workers {workers}: must be >= 1")
+    if args.device == "cuda":
+        import torch
+
+        if not torch.cuda.is_available():
+            raise DagsError(f"--device cuda: no CUDA device available to torch {torch.__version__}; use --device cpu")
+    overrides = [kv for group in args.overrides for kv in group]
+    specs = plan_runs(presets, scenes, seeds, args.steps, overrides, args.out, mcap=args.mcap, device=args.device)
+    args.out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    skipped, results = sweep(specs, workers=workers, ray_address=args.ray, gpu=args.device == "cuda",
+                             progress=args.progress)
+    where = f"Ray ({args.ray})" if args.ray else f"{workers} local worker{'s' if workers > 1 else ''}"
+    print(f"dagsbench: {len(results)} run{'s' if len(results) != 1 else ''} in {time.perf_counter() - t0:.1f} s "
+          f"on {where}, {len(skipped)} already finished (skipped)")
+    from dynactivegs.eval.tables import write_reports
+
+    wanted = {(s.preset, s.scene, s.seed) for s in specs}
+    finished = [r for r in load_results(args.out) if (r["preset"], r["scene"], r["seed"]) in wanted]
+    for path in write_reports(finished, args.out):
+        print(f"  {path}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    try:
+        return run(args)
+    except DagsError as e:
+        print(f"dagsbench: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,119 @@
+"""Benchmark tables and plots from synthetic per-run metrics: bold on the best, mean ± std over seeds, layouts."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+
+import numpy as np
+import pytest
+
+from dynactivegs.config import PRESETS, to_json
+from dynactivegs.eval import tables
+from dynactivegs.eval.tables import (components_table, main_table, planner_table, selection_table, to_csv,
+                                     to_markdown, write_reports)
+
+
+def fake_run(preset: str, scene: str, seed: int, *, acc: float, cr: float, psnr: float, steps: int = 100,
+             lpips: float | None = None) -> dict:
+    """A run's metrics dict as dagsbench writes it; metrics grow linearly to the given final values."""
+    cps = []
+    for f in tables.FRACTIONS:
+        cps.append({"fraction": f, "step": int(f * steps), "acc_cm": acc / f, "comp_cm": 10.0 / f, "cr_pct": cr * f,
+                    "psnr_db": psnr * f, "ssim": 0.5 * f, "lpips": lpips, "depth_l1_cm": 5.0 / f})
+    return {"preset": preset, "scene": scene, "seed": seed, "steps": steps,
+            "config": json.loads(to_json(PRESETS[preset])), "checkpoints": cps,
+            "coverage": [[s, min(100.0, s * cr / steps)] for s in range(0, steps + 1, 10)]}
+
+
+def runs_two_methods() -> list[dict]:
+    # full: C.R. 90 / 92 / 94 on seeds 0-2 on scene a (mean 92, std 2); baseline 80 / 80 / 80
+    out = []
+    for k, cr in enumerate((90.0, 92.0, 94.0)):
+        out.append(fake_run("full", "a", k, acc=2.0, cr=cr, psnr=25.0))
+        out.append(fake_run("full", "b", k, acc=3.0, cr=cr - 10, psnr=23.0))
+        out.append(fake_run("baseline", "a", k, acc=4.0, cr=80.0, psnr=20.0))
+        out.append(fake_run("baseline", "b", k, acc=1.0, cr=70.0, psnr=21.0))
+    return out
+
+
+def row(t, method: str, label: str) -> tuple[tuple[str, ...], tuple[bool, ...]]:
+    for r, b in zip(t.rows, t.best):
+        if r[0] == method and r[1] == label:
+            return r, b
+    raise KeyError((method, label))
+
+
+def test_main_table_mean_std_and_best():
+    t = main_table(runs_two_methods())
+    assert t.header == ("Method", "Metric", "a", "b", "Mean")
+    r, b = row(t, "full", "C.R. (%)")
+    assert r[2:] == ("92.0 ± 2.0", "82.0 ± 2.0", "87.0 ± 2.0")     # sample std of 90, 92, 94 is 2
+    assert b[2:] == (True, True, True)
+    r, b = row(t, "baseline", "C.R. (%)")
+    assert r[2:] == ("80.0 ± 0.0", "70.0 ± 0.0", "75.0 ± 0.0") and b[2:] == (False, False, False)
+    # Acc: lower is better; baseline wins scene b and the mean (2.5 vs 2.5 -> tie: both bold)
+    _, bf = row(t, "full", "Acc (cm)")
+    _, bb = row(t, "baseline", "Acc (cm)")
+    assert bf[2:] == (True, False, True) and bb[2:] == (False, True, True)
+    md = to_markdown(t)
+    assert "| full | C.R. (%) | **92.0 ± 2.0** | **82.0 ± 2.0** | **87.0 ± 2.0** |" in md
+    assert "| baseline | LPIPS | n/a | n/a | n/a |" in md                 # never a number without weights
+
+
+def test_mean_column_averages_scenes_per_seed_before_the_std():
+    runs = [fake_run("full", "a", 0, acc=1, cr=10.0, psnr=1), fake_run("full", "b", 0, acc=1, cr=30.0, psnr=1),
+            fake_run("full", "a", 1, acc=1, cr=20.0, psnr=1), fake_run("full", "b", 1, acc=1, cr=60.0, psnr=1)]
+    c = tables.mean_cell(runs, "cr_pct")
+    assert c.mean == pytest.approx(30.0) and c.std == pytest.approx(np.std([20.0, 40.0], ddof=1)) and c.n == 2
+
+
+def test_single_seed_prints_no_std_and_csv_holds_numbers():
+    t = main_table([fake_run("full", "a", 0, acc=2.0, cr=90.0, psnr=25.0),
+                    fake_run("baseline", "a", 0, acc=3.0, cr=80.0, psnr=20.0)])
+    r, _ = row(t, "full", "PSNR (dB)")
+    assert r[2:] == ("25.00", "25.00")
+    recs = list(csv.DictReader(io.StringIO(to_csv(t))))
+    full_cr = [x for x in recs if x["method"] == "full" and x["metric"] == "cr_pct" and x["scene"] == "a"]
+    assert len(full_cr) == 1 and float(full_cr[0]["mean"]) == 90.0 and full_cr[0]["best"] == "True"
+    lp = [x for x in recs if x["metric"] == "lpips"]
+    assert all(x["mean"] == "" for x in lp)
+
+
+def test_ablation_rows_follow_the_config_switches():
+    runs = [fake_run(p, "a", 0, acc=1.0 + i, cr=50.0 + i, psnr=20.0 + i)
+            for i, p in enumerate(("baseline", "weighted", "motion_view", "full", "frontier"))]
+    t = components_table(runs)
+    assert [r[0] for r in t.rows] == ["baseline", "weighted", "motion_view", "full"]     # frontier is no component
+    assert [r[1:4] for r in t.rows] == [("✗", "✗", "✗"), ("✓", "✗", "✗"), ("✓", "✓", "✗"), ("✓", "✓", "✓")]
+    assert t.best[3][4 + 2] and not any(b[4 + 2] for b in t.best[:3])               # C.R. best: full
+    # Table 4 has a single matching row (full) -> not written; Table 5: motion_view is the "shortest" planner row
+    assert selection_table(runs) is None
+    p = planner_table(runs)
+    assert [r[0] for r in p.rows] == ["shortest", "dyn_edge_temporal (full)"]
+    assert p.header[1:5] == ("C.R. (%) @25%", "C.R. (%) @50%", "C.R. (%) @75%", "C.R. (%) @100%")
+    assert p.rows[1][1:5] == ("13.2", "26.5", "39.8", "53.0")                           # C.R. at each path ratio
+
+
+def test_identical_configs_under_two_names_count_once():
+    runs = [fake_run("motion_view", "a", 0, acc=1, cr=50.0, psnr=20),
+            fake_run("plan_shortest", "a", 0, acc=1, cr=50.0, psnr=20),
+            fake_run("plan_dyn_edge", "a", 0, acc=1, cr=60.0, psnr=20)]
+    p = planner_table(runs)
+    assert [r[0] for r in p.rows] == ["shortest", "dyn_edge"]
+    assert all(rec["n_seeds"] == 1 for rec in p.records)
+
+
+def test_write_reports_writes_tables_and_pngs(tmp_path):
+    paths = write_reports(runs_two_methods(), tmp_path)
+    names = sorted(p.name for p in paths)
+    assert names == ["ablation_components.csv", "ablation_components.md", "coverage.png", "main.csv", "main.md",
+                     "progress.png"]
+    for p in paths:
+        if p.suffix == ".png":
+            assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and p.stat().st_size > 5000
+    series = tables.progress_series(runs_two_methods(), "psnr_db")
+    # the mean of scenes a (25 dB) and b (23 dB) at each checkpoint
+    np.testing.assert_allclose(series["full"][1], [24.0 * f for f in tables.FRACTIONS])
+    assert write_reports([], tmp_path / "empty") == []

@@ -1,0 +1,123 @@
+"""``dagsbench`` end to end on a tiny setting: runs, metrics files, MCAP logs, tables, plots, resume, Ray."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+from dynactivegs.eval.progress import checkpoint_steps
+from recorder import bench
+
+TINY = ["--suite", "tiny-00", "--seeds", "0", "--steps", "6", "--no-progress",
+        "--set", "sim.camera.width_px=64", "sim.camera.height_px=40", "eval.n_gt_points=5000", "eval.n_views=4",
+        "eval.coverage_points=500"]
+
+
+def tiny_args(out, cache, presets="baseline,full", *extra: str) -> list[str]:
+    return ["--presets", presets, "--out", str(out), *TINY, f"eval.cache_dir={cache}", *extra]
+
+
+@pytest.fixture(scope="module")
+def finished(tmp_path_factory):
+    """One two-run sweep (baseline and full on tiny-00, 6 steps), shared by the tests below."""
+    out, cache = tmp_path_factory.mktemp("bench"), tmp_path_factory.mktemp("cache")
+    assert bench.main(tiny_args(out, cache)) == 0
+    return out, cache
+
+
+def test_runs_write_metrics_at_every_checkpoint_and_a_log(finished):
+    out, _ = finished
+    for p in ("baseline", "full"):
+        r = json.loads((out / "runs" / p / "tiny-00-seed0.json").read_text())
+        assert (r["preset"], r["scene"], r["seed"], r["steps"]) == (p, "tiny-00", 0, 6)
+        assert [c["step"] for c in r["checkpoints"]] == list(checkpoint_steps(6)) == [2, 3, 5, 6]
+        assert [c["fraction"] for c in r["checkpoints"]] == [0.25, 0.5, 0.75, 1.0]
+        for c in r["checkpoints"]:
+            assert 0.0 <= c["cr_pct"] <= 100.0 and c["acc_cm"] > 0 and c["psnr_db"] > 0 and c["n_views"] == 4
+            assert c["lpips"] is None and "n/a" in f"{c['lpips_note']} n/a"
+        assert r["coverage"][0][0] == 1 and r["coverage"][-1][0] == 6
+        assert r["config"]["sim"]["camera"]["width_px"] == 64
+        assert r["config"]["mapping"]["weighted"] is (p == "full")
+        log = out / "runs" / p / "tiny-00-seed0.mcap"
+        assert r["mcap"] == log.name and log.stat().st_size > 0
+    # the map grows, so the last checkpoint covers no less than the first
+    full = json.loads((out / "runs" / "full" / "tiny-00-seed0.json").read_text())
+    assert full["checkpoints"][-1]["n_gaussians"] >= full["checkpoints"][0]["n_gaussians"] > 0
+
+
+def test_log_replays_as_whole_steps(finished):
+    from replay.source import LogReader
+
+    out, _ = finished
+    reader = LogReader(out / "runs" / "full" / "tiny-00-seed0.mcap")
+    assert [s.step for s in reader.steps()] == list(range(6))
+    assert reader.metadata["preset"] == "full" and reader.metadata["steps_requested"] == "6"
+
+
+def test_tables_and_plots_are_written(finished):
+    out, _ = finished
+    for name in ("main.md", "main.csv", "ablation_components.md", "ablation_components.csv", "progress.png",
+                 "coverage.png"):
+        assert (out / name).stat().st_size > 0, name
+    md = (out / "main.md").read_text()
+    assert "| Method | Metric | tiny-00 | Mean |" in md and "| full | C.R. (%) |" in md and "**" in md
+    assert "| full | LPIPS | n/a | n/a |" in md
+    assert not (out / "ablation_selection.md").exists()      # only full of Table 4's variants was run
+
+
+def test_second_invocation_skips_finished_runs(finished, capsys):
+    out, cache = finished
+    stamp = (out / "runs" / "full" / "tiny-00-seed0.json").stat().st_mtime_ns
+    assert bench.main(tiny_args(out, cache)) == 0
+    printed = capsys.readouterr().out
+    assert "0 runs in" in printed and "2 already finished (skipped)" in printed
+    assert (out / "runs" / "full" / "tiny-00-seed0.json").stat().st_mtime_ns == stamp
+
+
+def test_resume_refuses_other_settings(finished, capsys):
+    out, cache = finished
+    assert bench.main(tiny_args(out, cache, "full", "mapping.weighted=false")) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("dagsbench: error:") and "other settings" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--presets", "baseline,nope"], "unknown preset 'nope'"),
+    (["--suite", "mansion"], "mansion"),
+    (["--seeds", "0,x"], "--seeds"),
+    (["--set", "mapping.nope=1"], "unknown config key 'mapping.nope'"),
+    (["--set", "eval.n_views=0"], "eval.n_views"),
+    (["--set", "sim.scene"], "key=value"),
+    (["--steps", "0"], "--steps"),
+])
+def test_bad_input_is_one_line(tmp_path, capsys, argv, words):
+    assert bench.main(["--out", str(tmp_path / "o"), "--no-progress", *argv]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("dagsbench: error:") and words in err and err.count("\n") == 1, err
+    assert not (tmp_path / "o" / "runs").exists()
+
+
+def test_console_script_help():
+    r = subprocess.run([sys.executable, "-m", "recorder.bench", "--help"], capture_output=True, text=True, check=True)
+    assert "--ray ADDRESS" in r.stdout and "--presets" in r.stdout
+
+
+def test_two_runs_through_a_local_ray_instance(finished, tmp_path, capsys):
+    ray = pytest.importorskip("ray", reason="Ray is not installed: pip install 'dynactivegs[ray]'")
+    cache = finished[1]                     # the ground truth of tiny-00 is cached there already
+    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        assert ray.cluster_resources().get("CPU") == 2
+        out = tmp_path / "out"
+        assert bench.main(tiny_args(out, cache, "baseline,full", "--ray", "local", "--no-mcap")) == 0
+        assert "2 runs in" in capsys.readouterr().out
+    finally:
+        ray.shutdown()
+    for p in ("baseline", "full"):
+        r = json.loads((out / "runs" / p / "tiny-00-seed0.json").read_text())
+        assert r["mcap"] is None and len(r["checkpoints"]) == 4
+        assert not (out / "runs" / p / "tiny-00-seed0.mcap").exists()
+    assert (out / "main.md").is_file()
