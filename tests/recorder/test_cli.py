@@ -43,9 +43,8 @@ def test_dagsrun_bad_input_is_one_line_exit_2(tmp_path, capsys):
     if not torch.cuda.is_available():
         cases.append((["--device", "cuda"], "--device cuda: no CUDA device"))
     for argv, phrase in cases:
-        rc = main(argv + ["--out", str(tmp_path), "--no-progress", "--no-eval", "--steps", argv[-1]
-                          if argv[0] == "--steps" else "2"] if argv[0] != "--steps" else
-                  argv + ["--out", str(tmp_path), "--no-progress", "--no-eval"])
+        steps = [] if argv[0] == "--steps" else ["--steps", "2"]
+        rc = main(argv + steps + ["--out", str(tmp_path), "--no-progress", "--no-eval"])
         err = capsys.readouterr().err.strip()
         assert rc == 2, argv
         assert len(err.splitlines()) == 1 and phrase in err and err.startswith("dagsrun: error:"), err
