@@ -89,9 +89,10 @@ def next_action(pose: RobotPose2D, waypoints_xy_m: np.ndarray, target_yaw_rad: f
                 cfg: ActionConfig) -> PathStep:
     """The next discrete action to follow ``waypoints_xy_m`` (K, 2) and end facing ``target_yaw_rad``.
 
-    Waypoints up to the last one within ``reach_tol_m`` of the robot are taken as reached.
-    Then: turn toward the next waypoint until the heading error is at most half a turn step,
-    go forward; with all waypoints reached, turn to ``target_yaw_rad`` (the shorter way) and
+    Waypoints up to the last one within ``reach_tol_m`` of the robot are taken as reached, and so
+    is one the robot is already alongside the next segment of. Then: turn toward the farthest
+    waypoint whose chord from the robot stays within ``radius_m`` of the waypoints it skips,
+    until the heading error is at most half a turn step, go forward; with all waypoints reached, turn to ``target_yaw_rad`` (the shorter way) and
     STOP once within half a turn step (``None``: STOP at once).
     """
     wp = np.asarray(waypoints_xy_m, np.float64).reshape(-1, 2)
@@ -99,12 +100,36 @@ def next_action(pose: RobotPose2D, waypoints_xy_m: np.ndarray, target_yaw_rad: f
     d = np.hypot(wp[:, 0] - pose.x_m, wp[:, 1] - pose.y_m)
     within = np.nonzero(d <= cfg.reach_tol_m)[0]
     k = int(within[-1]) + 1 if len(within) else 0
+    # Already alongside the segment wp[k] -> wp[k+1]: skip wp[k] rather than turn back to it
+    # (the nearest graph node is often behind a robot that is between two nodes).
+    xy = np.array([pose.x_m, pose.y_m])
+    while k + 1 < len(wp):
+        seg = wp[k + 1] - wp[k]
+        t = float(np.dot(xy - wp[k], seg) / max(float(np.dot(seg, seg)), 1e-12))
+        off = float(np.linalg.norm(wp[k] + min(max(t, 0.0), 1.0) * seg - xy))
+        if not (0.0 < t < 1.0 and off <= cfg.radius_m + cfg.reach_tol_m):
+            break
+        k += 1
+    # Cut wiggles of the skeleton: head straight for the farthest waypoint j such that every
+    # waypoint skipped lies within the robot's radius of the chord robot -> wp[j] (the skeleton
+    # keeps at least that clearance, so the chord stays in free space; the depth check guards
+    # the rest). A turn step costs as much as a forward step, so zig-zags are slow.
+    j = k
+    while j + 1 < len(wp):
+        chord = wp[j + 1] - xy
+        n2 = max(float(np.dot(chord, chord)), 1e-12)
+        mid = wp[k:j + 1]
+        t = np.clip((mid - xy) @ chord / n2, 0.0, 1.0)
+        if np.max(np.linalg.norm(xy + t[:, None] * chord - mid, axis=1)) > cfg.radius_m:
+            break
+        j += 1
+    k_aim = j
     if k == len(wp):
         if target_yaw_rad is None:
             return PathStep(Action.STOP, k)
         turn = _turn_toward(wrap_angle(target_yaw_rad - pose.yaw_rad), half)
         return PathStep(Action.STOP if turn is None else turn, k)
-    bearing = math.atan2(wp[k, 1] - pose.y_m, wp[k, 0] - pose.x_m)
+    bearing = math.atan2(wp[k_aim, 1] - pose.y_m, wp[k_aim, 0] - pose.x_m)
     turn = _turn_toward(wrap_angle(bearing - pose.yaw_rad), half)
     return PathStep(Action.FORWARD if turn is None else turn, k)
 

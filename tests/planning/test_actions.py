@@ -105,3 +105,18 @@ def test_config_validation():
         ActionConfig(reach_tol_m=0.1)                                # would overshoot back and forth
     with pytest.raises(ConfigError):
         ActionConfig(stuck_steps=0)
+
+
+def test_a_robot_between_two_nodes_does_not_turn_back_to_the_one_behind_it():
+    # robot at x=0.6 on the segment (0,0) -> (1,0), facing +x: the node behind is passed
+    assert act(0.6, 0.05, 0, [[0, 0], [1, 0], [2, 0]]).action == Action.FORWARD
+
+
+def test_small_zig_zags_of_the_skeleton_are_cut_straight():
+    # waypoints wiggle by 0.1 m (< robot radius) around the x axis: head straight along it
+    wiggle = [[0.5, 0.1], [1.0, -0.1], [1.5, 0.1], [2.0, 0.0]]
+    assert act(0, 0, 0, wiggle).action == Action.FORWARD
+    # a real corner (1 m off the chord) is not cut: the robot first aims at the corner
+    corner = [[1.0, 0.0], [1.0, 1.0]]
+    assert act(0, 0, 0, corner).action == Action.FORWARD
+    assert act(0, 0, 30, corner).action == Action.TURN_RIGHT
