@@ -274,6 +274,19 @@ def run_ray(specs: list[RunSpec], address: str, gpu: bool) -> Iterator[dict[str,
             ray.shutdown()
 
 
+def prepare_ground_truth(specs: list[RunSpec]) -> None:
+    """Compute (or find cached) each scene's ground-truth points once, before parallel workers all would."""
+    from dynactivegs.eval.geometry import ground_truth_points
+
+    seen = set()
+    for spec in specs:
+        cfg, ecfg = spec.config(), spec.eval_config()
+        key = (to_json(cfg.sim), to_json(ecfg))
+        if key not in seen:
+            seen.add(key)
+            ground_truth_points(cfg.sim, ecfg)
+
+
 def sweep(specs: list[RunSpec], *, workers: int = 1, ray_address: str | None = None, gpu: bool = False,
           progress: bool = True) -> tuple[list[RunSpec], list[dict[str, Any]]]:
     """Run the unfinished ``specs``; returns (the skipped ones, the new results)."""
@@ -284,6 +297,8 @@ def sweep(specs: list[RunSpec], *, workers: int = 1, ray_address: str | None = N
         return skipped, results
     from tqdm import tqdm
 
+    if not ray_address and workers > 1:
+        prepare_ground_truth(todo)
     bar = tqdm(total=len(todo), desc="runs", unit="run", disable=not progress, dynamic_ncols=True)
     stream = run_ray(todo, ray_address, gpu) if ray_address else run_local(todo, workers)
     try:

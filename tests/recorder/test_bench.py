@@ -22,9 +22,10 @@ def tiny_args(out, cache, presets="baseline,full", *extra: str) -> list[str]:
 
 @pytest.fixture(scope="module")
 def finished(tmp_path_factory):
-    """One two-run sweep (baseline and full on tiny-00, 6 steps), shared by the tests below."""
+    """One two-run sweep (baseline and full on tiny-00, 6 steps) on a pool of two processes, shared below."""
     out, cache = tmp_path_factory.mktemp("bench"), tmp_path_factory.mktemp("cache")
-    assert bench.main(tiny_args(out, cache)) == 0
+    assert bench.main(tiny_args(out, cache, "baseline,full", "--workers", "2")) == 0
+    assert len(list((cache / "gt_points").glob("tiny-00*.npz"))) == 1     # computed once, before the workers
     return out, cache
 
 
