@@ -64,6 +64,8 @@ def step(cfg: PerceptionConfig, rec: StepRecord, state: PerceptionState,
         mlp, loss = train(cfg.uncertainty, mlp, state.prev_feats, state.prev_rgb, state.prev_depth_m,
                           prev.render_rgb.astype(np.float32) / 255.0, prev.render_depth_m, prev.render_alpha, rng)
         trained = not np.isnan(loss)
-    beta = predict(cfg.uncertainty, mlp, feats, frame.depth_m.shape)
+    # rounded to half precision (11 significant bits, 0.05 %): what is logged is exactly what the
+    # later stages read, and the cleared low mantissa bits halve the compressed log
+    beta = predict(cfg.uncertainty, mlp, feats, frame.depth_m.shape).astype(np.float16).astype(np.float32)
     new_state = PerceptionState(mlp, state.extractor_seed, feats, frame.rgb, frame.depth_m)
     return new_state, PerceptionOut(beta=beta, loss=loss, trained=trained)
