@@ -51,10 +51,11 @@ import numpy as np
 from dynactivegs import records
 from dynactivegs.errors import DagsError
 
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 """Version of the message encoding and of the record layouts. Bump it when a record's fields change.
 
-2: ``/fields`` may hold a :func:`encode_fields_delta` message (``_t`` ``FieldsDelta``)."""
+2: ``/fields`` may hold a :func:`encode_fields_delta` message (``_t`` ``FieldsDelta``).
+3: a ``FieldsDelta`` may also follow a grid that grew (the previous grid placed inside the new one)."""
 
 MIN_SCHEMA_VERSION = 1
 """Oldest schema version this code still reads."""
@@ -461,10 +462,35 @@ FIELDS_DELTA_TYPE = "FieldsDelta"
 _GRIDS = ("u_s", "u_m", "n_obs", "visible")
 
 
+def _grid_offset(cur_origin_m: np.ndarray, cur_shape: tuple[int, ...], prev: records.FieldsOut,
+                 voxel_m: float) -> tuple[int, int, int] | None:
+    """Where ``prev``'s grid sits inside a grid at ``cur_origin_m`` of ``cur_shape`` (whole voxels), or None."""
+    if prev.voxel_m != voxel_m or len(cur_shape) != 3:
+        return None
+    off = (np.asarray(prev.origin_m) - np.asarray(cur_origin_m)) / voxel_m
+    r = np.round(off)
+    if not np.all(np.abs(off - r) < 1e-6):
+        return None
+    o = tuple(int(v) for v in r)
+    if any(a < 0 or a + n > m for a, n, m in zip(o, prev.u_s.shape, cur_shape)):
+        return None
+    return o
+
+
+def _embedded_bits(prev_grid: np.ndarray, offset: tuple[int, int, int], shape: tuple[int, ...]) -> np.ndarray:
+    """``prev_grid``'s bits placed at ``offset`` in a zero grid of ``shape`` (the grid grew around it)."""
+    b = _bits(prev_grid)
+    if b.shape == tuple(shape):
+        return b
+    out = np.zeros(shape, b.dtype)
+    out[offset[0]:offset[0] + b.shape[0], offset[1]:offset[1] + b.shape[1], offset[2]:offset[2] + b.shape[2]] = b
+    return out
+
+
 def fields_delta_applies(cur: records.FieldsOut, prev: records.FieldsOut | None) -> bool:
-    """Whether ``cur`` can be stored as a delta of ``prev``: the same grid (shape, origin, voxel size)."""
-    return (prev is not None and cur.u_s.shape == prev.u_s.shape and cur.voxel_m == prev.voxel_m
-            and np.array_equal(cur.origin_m, prev.origin_m))
+    """Whether ``cur`` can be stored as a delta of ``prev``: same voxel size, and ``prev``'s grid lies
+    inside ``cur``'s at a whole-voxel offset (the same grid, or one that grew around it)."""
+    return prev is not None and _grid_offset(cur.origin_m, cur.u_s.shape, prev, cur.voxel_m) is not None
 
 
 def _bits(a: np.ndarray) -> np.ndarray:
@@ -475,12 +501,17 @@ def _bits(a: np.ndarray) -> np.ndarray:
 def encode_fields_delta(cur: records.FieldsOut, prev: records.FieldsOut) -> bytes:
     """``cur`` as the XOR of each grid's bits with ``prev``'s (voxels out of view XOR to 0 and compress away).
 
+    When the grid grew, ``prev`` is placed at its offset inside ``cur``'s grid and the new voxels
+    are XORed with zeros (stored as they are).
+
     Lossless: :func:`decode_fields_delta` with the same ``prev`` gives ``cur`` bit for bit.
     """
     assert fields_delta_applies(cur, prev)
     body = {"origin_m": _pack_array(cur.origin_m), "voxel_m": float(cur.voxel_m)}
+    off = _grid_offset(cur.origin_m, cur.u_s.shape, prev, cur.voxel_m)
     for name in _GRIDS:
-        body[name] = _pack_array(np.bitwise_xor(_bits(getattr(cur, name)), _bits(getattr(prev, name))))
+        base = _embedded_bits(getattr(prev, name), off, cur.u_s.shape)
+        body[name] = _pack_array(np.bitwise_xor(_bits(getattr(cur, name)), base))
     return msgpack.packb({"_t": FIELDS_DELTA_TYPE, "_v": SCHEMA_VERSION, **body}, use_bin_type=True)
 
 
@@ -496,15 +527,20 @@ def decode_fields_delta(data: bytes | memoryview, prev: records.FieldsOut | None
     if prev is None:
         raise _corrupt("FieldsDelta: no previous /fields message to apply it to")
     grids = {}
+    try:
+        origin = _unpack_array(m.get("origin_m"), "FieldsDelta.origin_m").copy()
+        voxel_m = float(m["voxel_m"])
+    except (ValueError, KeyError, TypeError) as e:
+        raise _corrupt(f"FieldsDelta: no valid grid origin / voxel size: {e}") from None
     for name in _GRIDS:
         base = getattr(prev, name)
         x = _unpack_array(m.get(name), f"FieldsDelta.{name}")
-        if x.shape != base.shape or x.dtype != _bits(base).dtype:
-            raise _corrupt(f"FieldsDelta.{name}: {x.dtype} {x.shape} does not match the previous grid "
+        off = _grid_offset(origin, x.shape, prev, voxel_m)
+        if off is None or x.dtype != _bits(base).dtype:
+            raise _corrupt(f"FieldsDelta.{name}: {x.dtype} {x.shape} does not fit the previous grid "
                            f"{base.dtype} {base.shape}")
-        grids[name] = np.bitwise_xor(x, _bits(base)).view(base.dtype)
+        grids[name] = np.bitwise_xor(x, _embedded_bits(base, off, x.shape)).view(base.dtype)
     try:
-        return records.FieldsOut(origin_m=_unpack_array(m.get("origin_m"), "FieldsDelta.origin_m").copy(),
-                                 voxel_m=float(m["voxel_m"]), **grids)
+        return records.FieldsOut(origin_m=origin, voxel_m=voxel_m, **grids)
     except (ValueError, KeyError, TypeError) as e:
         raise _corrupt(f"FieldsDelta: not a valid FieldsOut: {e}") from None

@@ -70,7 +70,7 @@ CHUNK_SIZE = 256 * 2 ** 20
 """Chunks close at step ends, not by size: a step larger than this is split (harmlessly) in two."""
 
 FIELDS_FULL_EVERY = 50
-"""``/fields`` is written whole at least every this many steps (and whenever the grid changes), else as a delta."""
+"""``/fields`` is written whole at least every this many steps (and when the grid does not contain the previous one), else as a delta."""
 
 VERSIONED_PACKAGES = ("dynactivegs", "numpy", "scipy", "torch", "mcap", "msgpack", "zstandard", "rerun-sdk",
                       "gsplat", "trimesh", "networkx")

@@ -74,3 +74,21 @@ def test_deltas_make_the_log_smaller(tmp_path):
     steps = LogReader(tmp_path / "f.mcap").read_all()
     whole = len(steps[0].raw["/fields"])
     assert (tmp_path / "f.mcap").stat().st_size < 3 * whole     # 10 steps in the space of 3 whole grids
+
+
+def test_delta_across_a_grid_that_grew_around_the_previous_one_is_bit_exact():
+    rng = np.random.default_rng(3)
+    prev = _fields(0, (6, 5, 4), rng, None)
+    grids = []
+    for g in (prev.u_s, prev.u_m, prev.n_obs):
+        big = rng.random((9, 7, 4), np.float32)                 # new voxels hold new values
+        big[2:8, 1:6, 0:4] = g                                  # the old grid, 2 and 1 voxels in
+        grids.append(big)
+    vis = np.zeros((9, 7, 4), bool)
+    vis[2:8, 1:6] = prev.visible
+    cur = records.FieldsOut(prev.origin_m - np.array([0.2, 0.1, 0.0]), 0.1, *grids, vis)
+    from recorder.codec import fields_delta_applies
+    assert fields_delta_applies(cur, prev)
+    assert _bits_equal(decode_fields_delta(encode_fields_delta(cur, prev), prev), cur)
+    shifted = records.FieldsOut(prev.origin_m + 0.05, 0.1, *grids, vis)    # half a voxel off: no delta
+    assert not fields_delta_applies(shifted, prev)
