@@ -14,11 +14,11 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import torch
 
 from dynactivegs.config import SimConfig
 from dynactivegs.eval.classification import auroc
 from dynactivegs.eval.ghosts import count_ghosts
+from dynactivegs.eval.rendering import psnr_db
 from dynactivegs.mapping import stage as mapping
 from dynactivegs.perception import stage as perception
 from dynactivegs.records import StepRecord
@@ -80,7 +80,7 @@ def run_tour(sim_cfg: SimConfig, perc_cfg: perception.PerceptionConfig, map_cfg:
         T = sim.camera_pose(turned)
         gt = sim.render_static(T)
         rgb, _, _ = mapping.render_view(map_cfg, g, sim.K, T, sim_cfg.camera.width_px, sim_cfg.camera.height_px)
-        psnrs.append(mapping.psnr_db(rgb, gt.rgb))
+        psnrs.append(psnr_db(rgb, gt.rgb))
     y = np.concatenate(labels) if labels else np.zeros(0, bool)
     a = auroc(np.concatenate(scores), y) if labels else float("nan")
     return TourResult(a, ghosts, float(np.mean(psnrs)), len(g), t_p / steps, t_m / steps)

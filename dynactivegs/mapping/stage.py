@@ -50,7 +50,6 @@ All tensors are float32 on the CPU by default (``device="cuda"`` uses gsplat whe
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Callable
 
@@ -297,9 +296,3 @@ def refine(cfg: MappingConfig, state: MappingState, iters: int, rng: np.random.G
             progress(k + 1)
     g, adam, _ = prune(cfg, g, adam)
     return MappingState(g, adam, kfs, state.steps)
-
-
-def psnr_db(a: np.ndarray, b: np.ndarray) -> float:
-    """PSNR of two uint8 images (dB)."""
-    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2)) / 255.0 ** 2
-    return math.inf if mse == 0 else -10.0 * math.log10(mse)
