@@ -41,6 +41,9 @@ class EvalConfig:
     """centres: a Gaussian counts when its peak opacity is above this."""
     alpha_min: float = 0.9
     """renders: a pixel counts when the render's accumulated opacity is above this."""
+    edge_jump_rel: float = 0.1
+    """renders: pixels on a depth edge (a neighbour farther than this x depth, and inverse depth not linear)
+    are left out: their expected depth blends two surfaces; 0 keeps them."""
     survey_spacing_m: float = 1.0
     """renders: spacing of the free-space lattice of survey positions the map is rendered from."""
     survey_yaws: int = 4
@@ -75,6 +78,7 @@ class EvalConfig:
         check_config(0.001 <= self.voxel_m <= 0.5, "eval.voxel_m", self.voxel_m, "in [0.001, 0.5] m")
         check_config(0.0 <= self.opacity_min < 1.0, "eval.opacity_min", self.opacity_min, "in [0, 1)")
         check_config(0.0 <= self.alpha_min < 1.0, "eval.alpha_min", self.alpha_min, "in [0, 1)")
+        check_config(0.0 <= self.edge_jump_rel < 1.0, "eval.edge_jump_rel", self.edge_jump_rel, "in [0, 1)")
         check_config(0.1 <= self.survey_spacing_m <= 10.0, "eval.survey_spacing_m", self.survey_spacing_m,
                      "in [0.1, 10] m")
         check_config(1 <= self.survey_yaws <= 72, "eval.survey_yaws", self.survey_yaws, "in [1, 72]")

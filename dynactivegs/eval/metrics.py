@@ -91,7 +91,8 @@ class SceneEvaluator:
         assert method == "renders", f"unknown reconstruction method {method!r}"
         cam = self.sim.camera
         return rendered_points(gaussians, self.survey_poses, self.K, cam.width_px, cam.height_px,
-                               alpha_min=self.cfg.alpha_min, voxel_m=self.cfg.voxel_m, backend=backend)
+                               alpha_min=self.cfg.alpha_min, edge_jump_rel=self.cfg.edge_jump_rel,
+                               voxel_m=self.cfg.voxel_m, backend=backend)
 
     def heldout(self, trajectory_xy_m: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Held-out poses (V, 4, 4) away from the trajectory (T, 2), and their static-only rgb and depth."""
@@ -108,7 +109,8 @@ class SceneEvaluator:
         keep ``cfg.min_trajectory_dist_m`` away from them.
         """
         rec = self.recon_points(gaussians, method, backend)
-        geo = geometry_metrics(rec.points_m, self.gt.points_m, self.cfg.cr_threshold_cm, gt_tree=self._gt_tree)
+        geo = geometry_metrics(rec.points_m, self.gt.points_m, self.cfg.cr_threshold_cm, gt_tree=self._gt_tree,
+                               gt_faces=self.gt.face_idx, triangles_m=self.scene.triangles_m)
         poses, rgb, depth = self.heldout(trajectory_xy_m)
         ren = render_metrics(gaussians, poses, rgb, depth, self.K, lpips_model=self.lpips_model,
                              lpips_note=self.lpips_note, backend=backend)

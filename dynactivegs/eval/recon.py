@@ -6,7 +6,9 @@
 - ``"renders"``: the map is rendered at a set of views (by default the survey views: a
   free-space lattice x evenly spaced headings) and each pixel whose accumulated opacity is
   above ``alpha_min`` is back-projected at its expected depth. This measures the surface the
-  map shows, as a mesh extracted from rendered depth would.
+  map shows, as a mesh extracted from rendered depth would. Expected depth blends the two
+  sides of a depth edge into "flying" pixels between them; as in depth fusion, pixels that
+  sit on a depth edge (:func:`depth_edge_mask`) are left out.
 
 Both are voxel-downsampled (centroid per voxel, 1 cm by default).
 """
@@ -54,9 +56,40 @@ def backproject_depth(depth_m: np.ndarray, mask: np.ndarray, K: np.ndarray, T_wo
     return p_cam @ T_world_cam[:3, :3].T + T_world_cam[:3, 3]
 
 
+def depth_edge_mask(depth_m: np.ndarray, valid: np.ndarray, jump_rel: float) -> np.ndarray:
+    """bool (H, W): pixels on a depth edge, whose depth a blend of two surfaces may have made up.
+
+    Along each image axis a pixel is smooth when both valid neighbours are within ``jump_rel`` x its
+    depth, or when inverse depth is linear across the three pixels (as on any plane, however
+    oblique) to within ``jump_rel / 4`` of its own. A pixel that is not smooth along both axes
+    is on an edge. Pixels at the image border or next to an invalid pixel have no linearity
+    test along that axis and must pass the jump test with the neighbour they have.
+    """
+    d = np.where(valid, depth_m.astype(np.float64), np.nan)
+    inv = 1.0 / d
+    edge = np.zeros(d.shape, bool)
+    for axis in (0, 1):
+        pad = [(0, 0), (0, 0)]
+        pad[axis] = (1, 1)
+        dp, ip = np.pad(d, pad, constant_values=np.nan), np.pad(inv, pad, constant_values=np.nan)
+        sl = [slice(None), slice(None)]
+        sl[axis] = slice(0, -2)
+        prev_d, prev_i = dp[tuple(sl)], ip[tuple(sl)]
+        sl[axis] = slice(2, None)
+        next_d, next_i = dp[tuple(sl)], ip[tuple(sl)]
+        with np.errstate(invalid="ignore"):
+            jump = np.fmax(np.abs(prev_d - d), np.abs(next_d - d))
+            near = ~(jump > jump_rel * d)                                          # NaN (no neighbour) is near
+            linear = np.abs(prev_i + next_i - 2.0 * inv) <= 0.25 * jump_rel * inv  # NaN (a side missing) is not
+        edge |= ~(near | linear)
+    return edge & valid
+
+
 def rendered_points(gaussians: Gaussians, poses: np.ndarray, K: np.ndarray, width: int, height: int, *,
-                    alpha_min: float = 0.9, voxel_m: float = 0.01, backend: Backend = "auto") -> ReconPoints:
-    """Back-projected depth of renders at ``poses`` (V, 4, 4) where the accumulated opacity exceeds ``alpha_min``."""
+                    alpha_min: float = 0.9, edge_jump_rel: float = 0.1, voxel_m: float = 0.01,
+                    backend: Backend = "auto") -> ReconPoints:
+    """Back-projected depth of renders at ``poses`` (V, 4, 4) where the accumulated opacity exceeds ``alpha_min``,
+    leaving out depth-edge pixels (:func:`depth_edge_mask` with ``edge_jump_rel``; 0 keeps every pixel)."""
     assert poses.ndim == 3 and poses.shape[1:] == (4, 4)
     parts = []
     if len(gaussians):
@@ -65,8 +98,12 @@ def rendered_points(gaussians: Gaussians, poses: np.ndarray, K: np.ndarray, widt
                 out = render(gaussians, K, T, width, height, backend=backend)
                 depth = out.depth.detach().to("cpu", torch.float64).numpy()
                 alpha = out.alpha.detach().to("cpu", torch.float64).numpy()
-                parts.append(backproject_depth(depth, (alpha > alpha_min) & (depth > 0), K, T))
+                keep = (alpha > alpha_min) & (depth > 0)
+                if edge_jump_rel > 0:
+                    keep &= ~depth_edge_mask(depth, keep, edge_jump_rel)
+                parts.append(backproject_depth(depth, keep, K, T))
     pts = np.concatenate(parts) if parts else np.zeros((0, 3))
     down = voxel_downsample(pts, voxel_m)
-    return ReconPoints(down, "renders", f"back-projected depth of {len(poses)} renders where alpha > {alpha_min:g}, "
-                                        f"{voxel_m * 100:g} cm voxels")
+    edges = f", depth edges (jump > {edge_jump_rel:g} x depth) left out" if edge_jump_rel > 0 else ""
+    return ReconPoints(down, "renders", f"back-projected depth of {len(poses)} renders where alpha > {alpha_min:g}"
+                                        f"{edges}, {voxel_m * 100:g} cm voxels")

@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+import trimesh
 
 from dynactivegs.config import CrowdConfig, SimConfig
 from dynactivegs.eval import geometry
@@ -48,6 +49,35 @@ def test_missing_half_gives_completion_ratio_about_half():
     assert m.comp_cm > 20.0                                    # the missing half is on average ~1 m away
 
 
+SQUARE = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0]],
+                   [[0.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]]])    # the unit square on z = 0, two triangles
+
+
+def sparse_square_samples(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` random points on SQUARE and the triangle each lies on."""
+    xy = np.random.default_rng(seed).random((n, 2))
+    return np.c_[xy, np.zeros(n)], (xy[:, 1] > xy[:, 0]).astype(np.int64)
+
+
+def test_surface_accuracy_is_free_of_the_sampling_floor():
+    gt, faces = sparse_square_samples(400, 3)                 # ~5 cm spacing: 2-3 cm to the nearest sample
+    recon = np.c_[np.random.default_rng(4).random((3000, 2)), np.zeros(3000)]
+    by_point = geometry_metrics(recon, gt)
+    by_surface = geometry_metrics(recon, gt, gt_faces=faces, triangles_m=SQUARE)
+    assert by_point.acc_cm > 1.5
+    assert by_surface.acc_cm == pytest.approx(0.0, abs=1e-9)   # every point lies on the surface
+    assert by_surface.comp_cm == by_point.comp_cm and by_surface.cr_pct == by_point.cr_pct
+
+
+def test_surface_accuracy_of_a_known_offset():
+    gt, faces = sparse_square_samples(400, 5)
+    recon = np.c_[np.random.default_rng(6).random((3000, 2)) * 0.8 + 0.1, np.full(3000, 0.03)]
+    m = geometry_metrics(recon, gt, gt_faces=faces, triangles_m=SQUARE)
+    assert m.acc_cm == pytest.approx(3.0, abs=1e-9)
+    far = geometry_metrics(recon + [0.0, 0.0, 0.5], gt, gt_faces=faces, triangles_m=SQUARE)
+    assert far.acc_cm == pytest.approx(53.0, abs=1e-9)
+
+
 def test_empty_reconstruction():
     m = geometry_metrics(np.zeros((0, 3)), plane_grid(0.1))
     assert math.isnan(m.acc_cm) and math.isnan(m.comp_cm) and m.cr_pct == 0.0
@@ -86,6 +116,10 @@ def test_ground_truth_points_are_the_visible_static_surface(tmp_path):
     assert 0.2 < gt.visible_fraction < 0.8
     # Floor, walls and ceiling are all seen.
     assert (pts[:, 2] < 0.01).mean() > 0.05 and (pts[:, 2] > scene.wall_height_m - 0.01).mean() > 0.02
+    # Each point lies on the triangle it is recorded with (float32 storage: ~1e-6 m).
+    on_face = trimesh.triangles.closest_point(scene.triangles_m[gt.face_idx], pts)
+    assert np.abs(on_face - pts).max() < 1e-5
+    assert np.array_equal(ground_truth_points(SIM, cfg).face_idx, gt.face_idx)       # through the cache too
 
 
 def test_people_never_appear_in_ground_truth_points(tmp_path):
