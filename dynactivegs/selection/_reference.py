@@ -12,39 +12,49 @@ import math
 
 import numpy as np
 
-from dynactivegs.selection.occupancy import FrameRays, OccupancyConfig, OccupancyGrid, apply_seen, frame_rays
+from dynactivegs.selection.occupancy import (FrameRays, OccupancyConfig, OccupancyGrid, apply_seen, frame_rays,
+                                             obstacle_tops)
 
 
-def _overlaps(x0: float, y0: float, x1: float, y1: float, j: int, i: int) -> bool:
-    """Whether the segment (x0, y0) -> (x1, y1) overlaps the open unit cell [j, j+1) x [i, i+1) over t in [0, 1]."""
+def _overlap(x0: float, y0: float, x1: float, y1: float, j: int, i: int) -> tuple[float, float] | None:
+    """The parameter range (t_lo, t_hi) in [0, 1] over which the segment (x0, y0) -> (x1, y1) lies in the
+    open unit cell [j, j+1) x [i, i+1); None without a positive-length overlap."""
     t_lo, t_hi = 0.0, 1.0
     for p, d, c in ((x0, x1 - x0, j), (y0, y1 - y0, i)):
         if d == 0.0:
             if not (c < p < c + 1):
-                return False
+                return None
             continue
         ta, tb = (c - p) / d, (c + 1 - p) / d
         t_lo, t_hi = max(t_lo, min(ta, tb)), min(t_hi, max(ta, tb))
-    return t_lo < t_hi
+    return (t_lo, t_hi) if t_lo < t_hi else None
 
 
-def seen_masks_reference(shape: tuple[int, int], rays: FrameRays) -> tuple[np.ndarray, np.ndarray]:
+def seen_masks_reference(shape: tuple[int, int], rays: FrameRays, top_m: np.ndarray,
+                         clear_below_m: float) -> tuple[np.ndarray, np.ndarray]:
     """Reference of :func:`dynactivegs.selection.occupancy.seen_masks`."""
     h, w = shape
     seen_free = np.zeros(shape, bool)
     seen_occ = np.zeros(shape, bool)
     x0, y0 = float(rays.start_g[0]), float(rays.start_g[1])
+    z0 = float(rays.start_z_m)
     for k in range(len(rays.end_g)):
         x1, y1 = float(rays.end_g[k, 0]), float(rays.end_g[k, 1])
+        z1 = float(rays.end_z_m[k])
         ei, ej = math.floor(y1), math.floor(x1)
-        for i in range(math.floor(min(y0, y1)), math.floor(max(y0, y1)) + 1):
-            for j in range(math.floor(min(x0, x1)), math.floor(max(x0, x1)) + 1):
-                if (i, j) == (ei, ej) and not rays.end_free[k]:
-                    continue
-                if 0 <= i < h and 0 <= j < w and _overlaps(x0, y0, x1, y1, j, i):
-                    seen_free[i, j] = True
         if rays.end_occupied[k] and 0 <= ei < h and 0 <= ej < w:
             seen_occ[ei, ej] = True
+        for i in range(math.floor(min(y0, y1)), math.floor(max(y0, y1)) + 1):
+            for j in range(math.floor(min(x0, x1)), math.floor(max(x0, x1)) + 1):
+                if not (0 <= i < h and 0 <= j < w):
+                    continue
+                if (i, j) == (ei, ej):
+                    seen_free[i, j] |= bool(rays.end_free[k])
+                    continue
+                span = _overlap(x0, y0, x1, y1, j, i)
+                if span is not None and (top_m[i, j] <= 0.0
+                                         or min(z0 + t * (z1 - z0) for t in span) < max(top_m[i, j], clear_below_m)):
+                    seen_free[i, j] = True
     ci, cj = math.floor(y0), math.floor(x0)
     if 0 <= ci < h and 0 <= cj < w:
         seen_free[ci, cj] = True
@@ -55,8 +65,9 @@ def update_occupancy_reference(grid: OccupancyGrid, cfg: OccupancyConfig, depth_
                                T_world_cam: np.ndarray, beta: np.ndarray) -> OccupancyGrid:
     """Reference of :func:`dynactivegs.selection.occupancy.update_occupancy`."""
     grid, rays = frame_rays(grid, cfg, depth_m, K, T_world_cam, beta)
-    seen_free, seen_occ = seen_masks_reference(grid.shape, rays)
-    return OccupancyGrid(grid.origin_ij, grid.cell_m, apply_seen(grid.logodds, seen_free, seen_occ, cfg))
+    top = obstacle_tops(grid.top_m, rays)
+    seen_free, seen_occ = seen_masks_reference(grid.shape, rays, top, cfg.clear_below_m)
+    return OccupancyGrid(grid.origin_ij, grid.cell_m, apply_seen(grid.logodds, seen_free, seen_occ, cfg), top)
 
 
 def dyn_distance_terms_reference(G, um_attr: str = "um_mean") -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -13,7 +13,14 @@ with ``(x0, y0) = origin_xy_m`` and ``r = cell_m``; its centre is at
 Update rule for one frame (see :func:`update_occupancy`):
 
 - Each valid pixel (depth > 0, within ``max_range_m``) is back-projected to a world point.
-- Its ray's ground projection, from the camera's cell to the point's cell, is *seen free*.
+- Its ray's ground projection, from the camera's cell up to the point's cell, is *seen free*,
+  except in cells where an obstacle has been seen that the ray passes over: a ray high above
+  the floor says nothing about a low obstacle under it (a seat, a bed). Each cell keeps the
+  top of the highest static obstacle return seen in it (``OccupancyGrid.top_m``); a ray
+  clears such a cell only where it passes lower than that top (through where the obstacle
+  was: a person who has walked on) or lower than ``clear_below_m``. Cells with no obstacle
+  seen yet are cleared by any ray (the floor near the robot is below the field of view).
+  The camera's own cell is free.
 - Points lower than ``band_lo_m`` are floor: their own cell is seen free too.
 - Points inside the body's height band ``[band_lo_m, band_hi_m]`` are obstacles: their cell
   is *seen occupied*, unless the pixel's uncertainty ``beta`` exceeds ``beta_max`` (probably
@@ -25,9 +32,8 @@ Update rule for one frame (see :func:`update_occupancy`):
   ``[logodds_min, logodds_max]``. Counting per frame rather than per ray makes the result
   independent of the ray order and of the pixel density.
 
-Known limitation: the ground projection of a ray that passes *over* a low obstacle (a seat
-under a ray that ends on the far floor) marks that obstacle's cell free; obstacles recover
-because ``l_occ`` outweighs ``l_free`` and they are hit from other views.
+A low obstacle not yet hit can be marked free by rays passing over it; once a ray hits it,
+``l_occ`` outweighs ``l_free`` and rays passing over it no longer clear it.
 """
 
 from __future__ import annotations
@@ -61,6 +67,9 @@ class OccupancyConfig:
     """Points lower than this above the floor are floor (free); the obstacle band starts here."""
     band_hi_m: float = 1.5
     """Points between band_lo_m and this height are obstacles for the robot's body."""
+    clear_below_m: float = 0.4
+    """A ray clears a cell with an obstacle seen in it only where it passes lower than this or than the
+    obstacle's top (inf: every ray clears every cell it passes)."""
     max_range_m: float = 6.0
     """Returns farther than this (horizontal distance) are cut: the ray is free up to this range, no endpoint."""
     beta_max: float = 0.5
@@ -86,6 +95,8 @@ class OccupancyConfig:
         check_config(0.005 <= self.cell_m <= 1.0, "occupancy.cell_m", self.cell_m, "in [0.005, 1] m")
         check_config(0.0 <= self.band_lo_m < self.band_hi_m, "occupancy.band_lo_m", self.band_lo_m,
                  ">= 0 and below occupancy.band_hi_m")
+        check_config(self.clear_below_m > self.band_lo_m, "occupancy.clear_below_m", self.clear_below_m,
+                     "above occupancy.band_lo_m")
         check_config(self.max_range_m > 0.0, "occupancy.max_range_m", self.max_range_m, "> 0 m")
         check_config(self.beta_max > 0.0, "occupancy.beta_max", self.beta_max, "> 0")
         check_config(self.l_free < 0.0, "occupancy.l_free", self.l_free, "< 0")
@@ -107,10 +118,15 @@ class OccupancyGrid:
     origin_ij: tuple[int, int]    # (row, col) offset of cell (0, 0) in cell units: origin_xy = (col, row) * cell_m
     cell_m: float
     logodds: np.ndarray           # float32 (H, W); 0 = never seen
+    top_m: np.ndarray | None = None   # float32 (H, W): highest static obstacle return seen in the cell (0: none)
 
     def __post_init__(self) -> None:
         assert self.logodds.ndim == 2 and self.logodds.dtype == np.float32
+        if self.top_m is None:
+            object.__setattr__(self, "top_m", np.zeros(self.logodds.shape, np.float32))
+        assert self.top_m.shape == self.logodds.shape and self.top_m.dtype == np.float32
         self.logodds.flags.writeable = False
+        self.top_m.flags.writeable = False
 
     # ------------------------------------------------------------------ construction
     @staticmethod
@@ -196,9 +212,11 @@ class OccupancyGrid:
             n_i0, n_j0 = min(n_i0, i0), min(n_j0, j0)
             n_i1, n_j1 = max(n_i1, i0 + h), max(n_j1, j0 + w)
         out = np.zeros((n_i1 - n_i0, n_j1 - n_j0), np.float32)
+        top = np.zeros_like(out)
         if h and w:
             out[i0 - n_i0:i0 - n_i0 + h, j0 - n_j0:j0 - n_j0 + w] = self.logodds
-        return OccupancyGrid((n_i0, n_j0), self.cell_m, out)
+            top[i0 - n_i0:i0 - n_i0 + h, j0 - n_j0:j0 - n_j0 + w] = self.top_m
+        return OccupancyGrid((n_i0, n_j0), self.cell_m, out, top)
 
 
 @dataclass(frozen=True, slots=True)
@@ -206,7 +224,9 @@ class FrameRays:
     """The 2D rays of one frame in grid coordinates (continuous cell units: x = col, y = row)."""
 
     start_g: np.ndarray           # float64 (2,) camera position, (x, y) in cell units of the grid
+    start_z_m: float              # camera height
     end_g: np.ndarray             # float64 (N, 2) ray ends, (x, y) in cell units of the grid
+    end_z_m: np.ndarray           # float64 (N,) height of the ray at its end (clipped at max_range_m)
     end_free: np.ndarray          # bool (N,) the end cell itself is seen free (floor return)
     end_occupied: np.ndarray      # bool (N,) the end cell is seen occupied (static obstacle return)
 
@@ -251,6 +271,8 @@ def frame_rays(grid: OccupancyGrid, cfg: OccupancyConfig, depth_m: np.ndarray, K
     scale = np.where(far, cfg.max_range_m / np.maximum(dist, 1e-12), 1.0)
     end_xy = cam_xy + delta * scale[:, None]
     z = pts[:, 2]
+    cam_z = float(T_world_cam[2, 3])
+    end_z = cam_z + (z - cam_z) * scale
     dynamic = beta.reshape(-1)[pix] > cfg.beta_max
     end_free = (z < cfg.band_lo_m) & ~far
     end_occ = (z >= cfg.band_lo_m) & (z <= cfg.band_hi_m) & ~far & ~dynamic
@@ -258,12 +280,13 @@ def frame_rays(grid: OccupancyGrid, cfg: OccupancyConfig, depth_m: np.ndarray, K
     hi = np.maximum(end_xy.max(axis=0), cam_xy) if len(end_xy) else cam_xy
     grid = grid.grown_to_include(lo, hi, cfg.grow_chunk_m)
     off = np.array([grid.origin_ij[1], grid.origin_ij[0]], np.float64)
-    return grid, FrameRays(cam_xy / grid.cell_m - off, end_xy / grid.cell_m - off, end_free, end_occ)
+    return grid, FrameRays(cam_xy / grid.cell_m - off, cam_z, end_xy / grid.cell_m - off, end_z, end_free, end_occ)
 
 
 @numba.njit(cache=True, nogil=True)
-def _trace_free(start_g, end_g, end_free, seen_free):  # pragma: no cover - compiled
-    """Amanatides-Woo traversal of every segment start -> end_k; marks the cells it passes as free.
+def _trace_free(start_g, start_z, end_g, end_z, end_free, top_m, clear_below, seen_free):  # pragma: no cover
+    """Amanatides-Woo traversal of every segment start -> end_k; marks a cell it passes as free where no
+    obstacle was seen (top_m 0) or the ray's lowest height in it is below max(top_m, clear_below).
 
     The end cell is marked only where ``end_free[k]``. The number of cells of an exact
     traversal is 1 + |di| + |dj|, so the loop runs exactly that many steps (robust to round-off).
@@ -273,6 +296,7 @@ def _trace_free(start_g, end_g, end_free, seen_free):  # pragma: no cover - comp
     ci0, cj0 = int(math.floor(y0)), int(math.floor(x0))
     for k in range(end_g.shape[0]):
         x1, y1 = end_g[k, 0], end_g[k, 1]
+        dz = end_z[k] - start_z
         ei, ej = int(math.floor(y1)), int(math.floor(x1))
         dx, dy = x1 - x0, y1 - y0
         sj = 1 if dx > 0 else -1
@@ -293,11 +317,17 @@ def _trace_free(start_g, end_g, end_free, seen_free):  # pragma: no cover - comp
             tmy = np.inf
         n = abs(ei - ci0) + abs(ej - cj0)
         i, j = ci0, cj0
+        t_in = 0.0
         for s in range(n + 1):
-            if s == n and not end_free[k]:
+            if s == n:
+                if end_free[k] and 0 <= i < h and 0 <= j < w:
+                    seen_free[i, j] = True
                 break
-            if 0 <= i < h and 0 <= j < w:
+            t_out = min(tmx, tmy, 1.0)
+            low = start_z + min(t_in, t_out) * dz if dz >= 0 else start_z + max(t_in, t_out) * dz
+            if 0 <= i < h and 0 <= j < w and (top_m[i, j] <= 0.0 or low < max(top_m[i, j], clear_below)):
                 seen_free[i, j] = True
+            t_in = t_out
             if tmx < tmy:
                 tmx += tdx
                 j += sj
@@ -309,10 +339,23 @@ def _trace_free(start_g, end_g, end_free, seen_free):  # pragma: no cover - comp
         seen_free[ci0, cj0] = True
 
 
-def seen_masks(shape: tuple[int, int], rays: FrameRays) -> tuple[np.ndarray, np.ndarray]:
-    """bool (H, W) cells seen free and seen occupied by the rays of one frame (fast kernel)."""
+def obstacle_tops(top_m: np.ndarray, rays: FrameRays) -> np.ndarray:
+    """float32 (H, W): ``top_m`` raised to this frame's static obstacle returns (their heights)."""
+    e = rays.end_g[rays.end_occupied]
+    ij = (np.floor(e[:, 1]).astype(np.int64), np.floor(e[:, 0]).astype(np.int64))
+    top = top_m.copy()
+    np.maximum.at(top, ij, rays.end_z_m[rays.end_occupied].astype(np.float32))
+    return top
+
+
+def seen_masks(shape: tuple[int, int], rays: FrameRays, top_m: np.ndarray,
+               clear_below_m: float) -> tuple[np.ndarray, np.ndarray]:
+    """bool (H, W) cells seen free and seen occupied by the rays of one frame (fast kernel);
+    ``top_m`` (H, W): obstacle tops including this frame's (:func:`obstacle_tops`)."""
     seen_free = np.zeros(shape, np.bool_)
-    _trace_free(rays.start_g, np.ascontiguousarray(rays.end_g), rays.end_free, seen_free)
+    _trace_free(rays.start_g, float(rays.start_z_m), np.ascontiguousarray(rays.end_g),
+                np.ascontiguousarray(rays.end_z_m, dtype=np.float64), rays.end_free,
+                np.ascontiguousarray(top_m, dtype=np.float32), float(clear_below_m), seen_free)
     seen_occ = np.zeros(shape, np.bool_)
     e = rays.end_g[rays.end_occupied]
     seen_occ[np.floor(e[:, 1]).astype(np.int64), np.floor(e[:, 0]).astype(np.int64)] = True
@@ -335,5 +378,6 @@ def update_occupancy(grid: OccupancyGrid, cfg: OccupancyConfig, depth_m: np.ndar
     """
     assert abs(grid.cell_m - cfg.cell_m) < 1e-12, "grid and config cell sizes differ"
     grid, rays = frame_rays(grid, cfg, depth_m, K, T_world_cam, beta)
-    seen_free, seen_occ = seen_masks(grid.shape, rays)
-    return OccupancyGrid(grid.origin_ij, grid.cell_m, apply_seen(grid.logodds, seen_free, seen_occ, cfg))
+    top = obstacle_tops(grid.top_m, rays)
+    seen_free, seen_occ = seen_masks(grid.shape, rays, top, cfg.clear_below_m)
+    return OccupancyGrid(grid.origin_ij, grid.cell_m, apply_seen(grid.logodds, seen_free, seen_occ, cfg), top)

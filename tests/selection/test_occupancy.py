@@ -107,6 +107,27 @@ def test_an_uncertain_person_clears_space_but_is_not_an_obstacle():
     assert g.states(CFG)[tuple(g.world_to_cell(np.array(cell_person)))] == CellState.FREE
 
 
+def test_rays_passing_high_over_a_low_obstacle_leave_it_occupied():
+    seat = (2.03, 1.33, 2.43, 1.73, 0.5)
+    depth, K, T, _ = _room_frame(boxes=[seat], x=0.3)             # seen from 1.7 m
+    beta = np.zeros_like(depth)
+    g = OccupancyGrid.empty(CFG.cell_m)
+    for _ in range(3):
+        g = update_occupancy(g, CFG, depth, K, T, beta)
+    ij = tuple(g.world_to_cell(np.array([2.05, 1.5])))
+    assert g.states(CFG)[ij] == CellState.OCCUPIED and 0.4 < g.top_m[ij] <= 0.5
+    # from 1 m the seat is below the field of view and no ray hits it; the lowest rays cross its
+    # cell at 0.6 m and more, which says nothing about a 0.5 m seat
+    empty_depth, K, T, _ = _room_frame(boxes=[seat], x=1.0)
+    kept, cleared = g, g
+    for _ in range(8):
+        kept = update_occupancy(kept, CFG, empty_depth, K, T, beta)
+        cleared = update_occupancy(cleared, dataclasses.replace(CFG, clear_below_m=math.inf), empty_depth, K, T, beta)
+    assert kept.states(CFG)[ij] == CellState.OCCUPIED
+    assert cleared.states(CFG)[ij] == CellState.FREE                # the whole-ray rule erases it
+    assert kept.states(CFG)[tuple(kept.world_to_cell(np.array([3.5, 1.5])))] == CellState.FREE   # floor near the wall
+
+
 def test_grid_grows_without_moving_what_it_knows():
     depth, K, T, _ = _room_frame()
     beta = np.zeros_like(depth)
