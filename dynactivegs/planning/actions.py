@@ -46,6 +46,12 @@ class ActionConfig:
     """Depth points higher than this do not block (above the robot's body)."""
     min_blocking_points: int = 3
     """This many depth points in the swept rectangle block the move (fewer are treated as noise)."""
+    forward_tol_deg: float = 15.0
+    """Following a path, the robot steps forward once heading within this of the waypoint it aims at
+    (a 0.25 m step at 15 deg drifts 6.5 cm sideways); turning to exactly +-5 deg makes it zig-zag."""
+    turn_commit_deg: float = 120.0
+    """A turn in progress is kept for heading errors above this the other way (the far side of a bearing
+    behind the robot); 180 never keeps it."""
     stuck_steps: int = 40
     """Steps without leaving a disc of stuck_move_tol_m after which the robot is stuck (above a full turn of steps)."""
     stuck_move_tol_m: float = 0.1
@@ -57,6 +63,10 @@ class ActionConfig:
         check_config(0.0 < self.radius_m <= 1.0, "actions.radius_m", self.radius_m, "in (0, 1] m")
         check_config(0.5 * self.forward_step_m < self.reach_tol_m, "actions.reach_tol_m", self.reach_tol_m,
                  "above half of actions.forward_step_m")
+        check_config(0.0 <= self.forward_tol_deg <= 45.0, "actions.forward_tol_deg", self.forward_tol_deg,
+                     "in [0, 45] deg")
+        check_config(0.0 <= self.turn_commit_deg <= 180.0, "actions.turn_commit_deg", self.turn_commit_deg,
+                     "in [0, 180] deg")
         check_config(0.0 <= self.band_lo_m < self.band_hi_m, "actions.band_lo_m", self.band_lo_m, "in [0, band_hi_m)")
         check_config(self.min_blocking_points >= 1, "actions.min_blocking_points", self.min_blocking_points, ">= 1")
         check_config(self.stuck_steps >= 1, "actions.stuck_steps", self.stuck_steps, ">= 1")
@@ -79,22 +89,34 @@ class PathStep:
     next_waypoint: int            # index of the first waypoint not yet reached (== len(waypoints) when all are)
 
 
-def _turn_toward(err_rad: float, half_step_rad: float) -> Action | None:
+def _turn_toward(err_rad: float, half_step_rad: float, prefer: Action | None = None,
+                 commit_rad: float = math.pi) -> Action | None:
+    """The turn that reduces the heading error ``err_rad`` the shorter way (None when within half a step).
+
+    With ``prefer`` (the turn just taken), an error of more than ``commit_rad`` the other way is
+    turned through the long way instead: a bearing behind the robot that wobbles from one side
+    to the other would otherwise make it turn back and forth on the spot.
+    """
     if abs(err_rad) <= half_step_rad + 1e-9:
         return None
-    return Action.TURN_LEFT if err_rad > 0 else Action.TURN_RIGHT
+    turn = Action.TURN_LEFT if err_rad > 0 else Action.TURN_RIGHT
+    if prefer in (Action.TURN_LEFT, Action.TURN_RIGHT) and turn != prefer and abs(err_rad) > commit_rad:
+        return prefer
+    return turn
 
 
 def next_action(pose: RobotPose2D, waypoints_xy_m: np.ndarray, target_yaw_rad: float | None,
-                cfg: ActionConfig) -> PathStep:
+                cfg: ActionConfig, prefer_turn: Action | None = None) -> PathStep:
     """The next discrete action to follow ``waypoints_xy_m`` (K, 2) and end facing ``target_yaw_rad``.
 
     Waypoints up to the last one within ``reach_tol_m`` of the robot are taken as reached, and so
     is one the robot is already alongside the next segment of. Then: turn toward the farthest
     waypoint whose chord from the robot stays within ``radius_m`` of the waypoints it skips,
-    until the heading error is at most half a turn step, go forward; with all waypoints reached, turn to ``target_yaw_rad`` (the shorter way) and
-    STOP once within half a turn step (``None``: STOP at once).
+    until the heading error is at most ``cfg.forward_tol_deg`` (or half a turn step), go forward; with all waypoints reached, turn to ``target_yaw_rad`` (the shorter way) and
+    STOP once within half a turn step (``None``: STOP at once). ``prefer_turn``: the turn the
+    robot just took; it is kept for heading errors above ``cfg.turn_commit_deg`` the other way.
     """
+    commit = math.radians(cfg.turn_commit_deg)
     wp = np.asarray(waypoints_xy_m, np.float64).reshape(-1, 2)
     half = 0.5 * math.radians(cfg.turn_step_deg)
     d = np.hypot(wp[:, 0] - pose.x_m, wp[:, 1] - pose.y_m)
@@ -127,10 +149,11 @@ def next_action(pose: RobotPose2D, waypoints_xy_m: np.ndarray, target_yaw_rad: f
     if k == len(wp):
         if target_yaw_rad is None:
             return PathStep(Action.STOP, k)
-        turn = _turn_toward(wrap_angle(target_yaw_rad - pose.yaw_rad), half)
+        turn = _turn_toward(wrap_angle(target_yaw_rad - pose.yaw_rad), half, prefer_turn, commit)
         return PathStep(Action.STOP if turn is None else turn, k)
     bearing = math.atan2(wp[k_aim, 1] - pose.y_m, wp[k_aim, 0] - pose.x_m)
-    turn = _turn_toward(wrap_angle(bearing - pose.yaw_rad), half)
+    go = max(half, math.radians(cfg.forward_tol_deg))
+    turn = _turn_toward(wrap_angle(bearing - pose.yaw_rad), go, prefer_turn, commit)
     return PathStep(Action.FORWARD if turn is None else turn, k)
 
 

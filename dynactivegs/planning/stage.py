@@ -230,7 +230,9 @@ def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
                 or now - planned_step >= cfg.replan_every):
             path, cost = _plan(cfg, sel, now_map, ema_map, blocks, robot_xy)
             k, planned_step, replanned = 0, now, True
-        ps = next_action(pose, path[k:], sel.target_yaw_rad, acfg)
+        prefer = Action(state.last_action) if state.last_action in (int(Action.TURN_LEFT), int(Action.TURN_RIGHT)) \
+            else None
+        ps = next_action(pose, path[k:], sel.target_yaw_rad, acfg, prefer)
         action, k = ps.action, k + ps.next_waypoint
         blocked = False
         if action == Action.FORWARD and (_block_ahead(blocks, robot_xy, fwd, acfg)
@@ -239,7 +241,7 @@ def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
             blocks = blocks + ((float(ahead[0]), float(ahead[1]), now + cfg.block_hold_steps),)
             path, cost = _plan(cfg, sel, now_map, ema_map, blocks, robot_xy)
             k, planned_step, replanned = 0, now, True
-            ps = next_action(pose, path, sel.target_yaw_rad, acfg)
+            ps = next_action(pose, path, sel.target_yaw_rad, acfg, prefer)
             action, k = ps.action, ps.next_waypoint
             if action == Action.FORWARD:
                 action = Action.STOP                       # the way is still blocked: wait for it to clear

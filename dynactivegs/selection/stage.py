@@ -75,6 +75,9 @@ class SelectionConfig:
     """lambda_r of eqs. (7) and (10): weight of the motion risk R_m against the gain I_s (full only)."""
     l_c: float = 1.0
     """lambda_c of eq. (7): weight of the travel cost C (gain per metre of path)."""
+    turn_cost_m: float = 1.43
+    """C of eq. (7) counts turning as travel: metres of path one radian of turning costs (a turn step
+    takes as long as a forward step: 0.25 m per 10 deg is 1.43 m/rad); 0 counts the path length only."""
     motion_weight: float = 4.0
     """l_m of the eq. (11) travel cost used by full: metres of detour worth one unit of mean U_m along an edge."""
     local_threshold: float = 4.0
@@ -121,7 +124,7 @@ class SelectionConfig:
     def __post_init__(self) -> None:
         check_config(self.variant in SELECTION_VARIANTS, "selection.variant", self.variant,
                      f"one of {SELECTION_VARIANTS}")
-        for name in ("l_r", "l_c", "motion_weight", "l_d", "l_v"):
+        for name in ("l_r", "l_c", "turn_cost_m", "motion_weight", "l_d", "l_v"):
             check_config(getattr(self, name) >= 0.0, f"selection.{name}", getattr(self, name), ">= 0")
         check_config(math.isfinite(self.local_threshold), "selection.local_threshold", self.local_threshold, "finite")
         check_config(self.visit_radius_m > 0.0, "selection.visit_radius_m", self.visit_radius_m, "> 0 m")
@@ -276,10 +279,21 @@ def _mark_bump(cfg: SelectionConfig, grid: OccupancyGrid, centre_xy: np.ndarray)
     ij = ij[(np.hypot(*(c - centre_xy).T) <= r) & grid.in_bounds(ij)]
     logodds = grid.logodds.copy()
     logodds[ij[:, 0], ij[:, 1]] = np.float32(cfg.occupancy.logodds_max)
-    return OccupancyGrid(grid.origin_ij, grid.cell_m, logodds)
+    return OccupancyGrid(grid.origin_ij, grid.cell_m, logodds, grid.top_m)
 
 
 # ---------------------------------------------------------------------------------------------- choosing
+def _turning_rad(xy: np.ndarray, yaws: np.ndarray, robot_xy: np.ndarray, robot_yaw: float, here_m: float) -> np.ndarray:
+    """(N, Y) radians of turning to take view (node n, yaw k): toward the node, then to the view's yaw
+    (just to the yaw at a node within ``here_m``). The straight bearing stands in for the path's."""
+    off = xy - robot_xy
+    bearing = np.arctan2(off[:, 1], off[:, 0])
+    far = np.hypot(off[:, 0], off[:, 1]) > here_m
+    on_way = np.where(far, np.abs(wrap_angle(bearing - robot_yaw)), 0.0)[:, None]
+    last = np.where(far[:, None], wrap_angle(yaws[None, :] - bearing[:, None]), wrap_angle(yaws[None, :] - robot_yaw))
+    return on_way + np.abs(last)
+
+
 def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, arrays: GraphArrays, regions: Subregions,
                  robot_node: int, robot_xy: np.ndarray, robot_yaw: float, fmap: FloorMap | None, banned: np.ndarray,
                  history: np.ndarray, graph_step: int) -> tuple[Target | None, int, Scores]:
@@ -304,16 +318,17 @@ def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, a
         occ, u_s, u_m, origin, voxel = fa
         gs, gm = bin_gains(vis, occ, u_s, u_m, origin, voxel, xy_nodes[nodes])
         gain, risk = view_gains(vis, gs), view_gains(vis, gm)                      # eqs. (8), (9)
-    cost = travel[nodes]
-    s_view = gain - (cfg.l_r * risk if full else 0.0)
-    score = s_view - (cfg.l_c * cost[:, None] if cfg.variant in ("gain_cost", "full") else 0.0)   # eq. (7)
     yaws = vis.yaws_rad
+    cost = travel[nodes][:, None] + cfg.turn_cost_m * _turning_rad(xy_nodes[nodes], yaws, robot_xy, robot_yaw,
+                                                                  cfg.reach_tol_m)
+    s_view = gain - (cfg.l_r * risk if full else 0.0)
+    score = s_view - (cfg.l_c * cost if cfg.variant in ("gain_cost", "full") else 0.0)   # eq. (7)
     # the view the robot already has is not a new target
     here = (np.hypot(*(xy_nodes[nodes] - robot_xy).T) <= cfg.reach_tol_m)[:, None] & \
         (np.abs((yaws[None, :] - robot_yaw + np.pi) % (2 * np.pi) - np.pi) <= math.radians(cfg.reach_yaw_deg))
     score = np.where(here, -np.inf, score)
     scores = Scores(graph_step, np.repeat(nodes, ny).astype(np.int32), np.tile(yaws, len(nodes)), gain.ravel(),
-                    risk.ravel(), np.repeat(cost, ny), score.ravel())
+                    risk.ravel(), cost.ravel(), score.ravel())
     if len(nodes) == 0 or not np.isfinite(score).any():
         return None, -1, scores
     labels = regions.labels[nodes]

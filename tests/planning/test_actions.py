@@ -30,9 +30,19 @@ def test_turns_toward_the_waypoint_and_goes_forward_when_aligned():
     assert act(0, 0, 0, [[0, 2]]).action == Action.TURN_LEFT
     assert act(0, 0, 0, [[0, -2]]).action == Action.TURN_RIGHT
     assert act(0, 0, 0, [[-2, 0.01]]).action == Action.TURN_LEFT      # behind: the shorter way
-    assert act(0, 0, 4.9, [[2, 0]]).action == Action.FORWARD           # within half a 10 deg step
-    assert act(0, 0, 5.2, [[2, 0]]).action == Action.TURN_RIGHT
-    assert act(0, 0, 175, [[-2, -0.35]]).action == Action.TURN_LEFT    # across the +-180 deg seam
+    assert act(0, 0, 14.9, [[2, 0]]).action == Action.FORWARD          # within forward_tol_deg (15)
+    assert act(0, 0, 15.2, [[2, 0]]).action == Action.TURN_RIGHT
+    assert act(0, 0, 175, [[-2, -0.5]]).action == Action.TURN_LEFT     # across the +-180 deg seam
+
+
+def test_a_turn_in_progress_is_kept_for_a_bearing_far_behind():
+    # 150 deg to the right, but the robot has just been turning left: it keeps turning left
+    assert act(0, 0, 0, [[-2, -1.15]]).action == Action.TURN_RIGHT
+    cfg = ActionConfig()
+    pose = RobotPose2D(0.0, 0.0, 0.0)
+    assert next_action(pose, np.array([[-2, -1.15]]), None, cfg, Action.TURN_LEFT).action == Action.TURN_LEFT
+    # 90 deg the other way is within turn_commit_deg: the shorter way wins
+    assert next_action(pose, np.array([[0, -2]]), None, cfg, Action.TURN_LEFT).action == Action.TURN_RIGHT
 
 
 def test_reached_waypoints_are_skipped_and_the_final_yaw_is_turned_to():

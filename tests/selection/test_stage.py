@@ -94,7 +94,8 @@ def test_the_target_behind_a_busy_corridor_loses_under_full_and_wins_under_stati
     one_region = SubregionConfig(cut_distance=1e6)
     picks = {}
     for variant in ("static_gain", "gain_cost", "full"):
-        cfg = selection.SelectionConfig(variant=variant, subregions=one_region, local_threshold=-1e9)
+        # the robot faces R: leave turning out of C so that only the corridor's motion sets the rooms apart
+        cfg = selection.SelectionConfig(variant=variant, subregions=one_region, local_threshold=-1e9, turn_cost_m=0.0)
         out = select_once(cfg, free, fo, mo, (4.5, 1.5))
         assert out.mode in ("local", "global") and out.target_node >= 0
         assert len(out.cand_score) == len(out.cand_node) > 0
@@ -215,3 +216,30 @@ def test_bad_config_values_raise_config_error():
         planning.PlanningConfig(replan_every=0)
     with pytest.raises(ConfigError):
         planning.PlanningConfig(path=PathConfig(variant="astar"))  # type: ignore[arg-type]
+
+
+def test_turning_counts_as_travel_so_the_room_ahead_wins_a_tie():
+    free = three_rooms()
+    fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0), (6.5, 0.5, 8.5, 2.5, 1.0)], [])
+    one_region = SubregionConfig(cut_distance=1e6)
+    for yaw_room_x in ((0.0, 5.5), (math.pi, 3.5)):
+        cfg = selection.SelectionConfig(variant="gain_cost", subregions=one_region)
+        state = selection.init_state(cfg)
+        grid = OccupancyGrid((0, 0), CELL, np.where(free, -1.0, 1.0).astype(np.float32))
+        state = selection.SelectionState(grid, state.graph, state.arrays, state.regions, -1, None,
+                                         state.history_xy_m, None, 0, (), state.scores, None)
+        frame = blind_frame(4.5, 1.5, yaw_room_x[0])
+        rec = StepRecord(frame=frame, perception=PerceptionOut(np.full((H, W), 0.1, np.float32), 0.0, False),
+                         mapping=mo, fields=fo)
+        out = selection.step(cfg, rec, state, derive_rng(0, "sel"))[1]
+        x = out.target_xy_m[0]
+        assert (x > yaw_room_x[1]) if yaw_room_x[0] == 0.0 else (x < yaw_room_x[1])
+
+
+def test_turning_radians_of_a_view():
+    xy = np.array([[1.0, 0.0], [0.0, 1.0], [0.05, 0.0]])
+    yaws = np.array([0.0, math.pi / 2, math.pi])
+    t = selection._turning_rad(xy, yaws, np.zeros(2), 0.0, 0.3)
+    assert t[0] == pytest.approx([0.0, math.pi / 2, math.pi])                 # ahead: only the final yaw
+    assert t[1] == pytest.approx([math.pi, math.pi / 2, math.pi])             # to the left: 90 deg, then to the yaw
+    assert t[2] == pytest.approx([0.0, math.pi / 2, math.pi])                 # here: the yaw change alone
