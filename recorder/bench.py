@@ -114,7 +114,10 @@ def resolve_scenes(suite: str) -> list[str]:
 
 def plan_runs(presets: list[str], scenes: list[str], seeds: list[int], steps: int, overrides: list[str],
               out_dir: Path, *, mcap: bool = True, device: str | None = None) -> list[RunSpec]:
-    """Every (preset, scene, seed) run, configs checked up front (bad names and overrides fail in one line)."""
+    """Every (preset, scene, seed) run, configs checked up front (bad names and overrides fail in one line).
+
+    Ordered seed, then scene, then preset: a sweep stopped part way has every preset of the
+    (scene, seed) pairs it finished, so its tables still compare like with like."""
     if steps < 1:
         raise DagsError(f"bad value --steps {steps}: must be >= 1")
     for p in presets:
@@ -122,7 +125,7 @@ def plan_runs(presets: list[str], scenes: list[str], seeds: list[int], steps: in
     dags_ov = tuple(kv for kv in overrides if not kv.startswith("eval."))
     eval_ov = tuple(kv[len("eval."):] for kv in overrides if kv.startswith("eval."))
     specs = [RunSpec(p, s, k, steps, dags_ov, eval_ov, str(out_dir), mcap, device)
-             for p in presets for s in scenes for k in seeds]
+             for k in seeds for s in scenes for p in presets]
     for spec in specs[:1]:
         spec.config()
         spec.eval_config()
