@@ -235,10 +235,13 @@ def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
         ps = next_action(pose, path[k:], sel.target_yaw_rad, acfg, prefer)
         action, k = ps.action, k + ps.next_waypoint
         blocked = False
-        if action == Action.FORWARD and (_block_ahead(blocks, robot_xy, fwd, acfg)
-                                         or forward_blocked(f.depth_m, f.K, f.T_world_cam, acfg)):
+        seen_block = action == Action.FORWARD and forward_blocked(f.depth_m, f.K, f.T_world_cam, acfg)
+        if action == Action.FORWARD and (seen_block or _block_ahead(blocks, robot_xy, fwd, acfg)):
             blocked = True
-            blocks = blocks + ((float(ahead[0]), float(ahead[1]), now + cfg.block_hold_steps),)
+            if seen_block:
+                # only fresh evidence starts or renews a block: one remembered block must not renew
+                # itself every step, or the robot waits in front of it forever
+                blocks = blocks + ((float(ahead[0]), float(ahead[1]), now + cfg.block_hold_steps),)
             path, cost = _plan(cfg, sel, now_map, ema_map, blocks, robot_xy)
             k, planned_step, replanned = 0, now, True
             ps = next_action(pose, path, sel.target_yaw_rad, acfg, prefer)

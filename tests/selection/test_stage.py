@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -243,3 +244,28 @@ def test_turning_radians_of_a_view():
     assert t[0] == pytest.approx([0.0, math.pi / 2, math.pi])                 # ahead: only the final yaw
     assert t[1] == pytest.approx([math.pi, math.pi / 2, math.pi])             # to the left: 90 deg, then to the yaw
     assert t[2] == pytest.approx([0.0, math.pi / 2, math.pi])                 # here: the yaw change alone
+
+
+def test_a_remembered_block_expires_instead_of_renewing_itself():
+    from tests.planning.test_paths import CELL as PCELL, box
+    from dynactivegs.selection.voronoi import VoronoiConfig, build_voronoi_graph
+    free = np.zeros((60, 190), bool)
+    box(free, 0.5, 0.5, 8.5, 2.5)                                     # one room: a single way ahead
+    G = build_voronoi_graph(free, np.zeros_like(free), PCELL, np.zeros(2), VoronoiConfig())
+    sel = _selection_out_from_graph(G, (7.5, 1.5))
+    fo, mo = fields_for(np.ones((60, 190), bool), [], [])
+    cfg = planning.PlanningConfig(path=PathConfig(variant="shortest"))
+    start = sel.node_xy_m[int(np.argmin(np.hypot(*(sel.node_xy_m - [1.5, 1.5]).T)))]
+    yaw = math.atan2(sel.target_xy_m[1] - start[1], sel.target_xy_m[0] - start[0])
+    ahead = start + 0.43 * np.array([math.cos(yaw), math.sin(yaw)])
+    state = planning.init_state(cfg)
+    state = dataclasses.replace(state, blocks=((float(ahead[0]), float(ahead[1]), cfg.block_hold_steps),))
+    actions = []
+    for t in range(cfg.block_hold_steps + 5):                         # the robot stays put: nothing moves
+        rec = StepRecord(frame=blind_frame(float(start[0]), float(start[1]), yaw, step=t), fields=fo,
+                         selection=sel, mapping=mo)
+        state, out = planning.step(cfg, rec, state, derive_rng(0, "p", t))
+        actions.append(out.action)
+    # nothing is seen ahead (the frames have no returns): once the remembered block expires it goes on
+    assert actions[0] == Action.STOP
+    assert Action.FORWARD in actions[cfg.block_hold_steps:]
