@@ -2,9 +2,10 @@
 
 - ``config.py``: :class:`EvalConfig`, every evaluation setting.
 - ``geometry.py``: ground-truth points (uniform over the static surface visible from free
-  space, cached on disk), Acc / Comp / C.R. with KD-trees, voxel downsampling.
+  space, cached on disk with the triangle each lies on), Acc (to those triangles) / Comp /
+  C.R. with KD-trees, voxel downsampling.
 - ``recon.py``: reconstruction points of a Gaussian map, from opaque centres or from
-  back-projected renders; the result names the method.
+  back-projected renders (depth-edge pixels left out); the result names the method.
 - ``views.py``: survey views and seeded held-out novel views away from the trajectory,
   static-only ground-truth renders.
 - ``rendering.py``: PSNR, SSIM, depth L1 and (with local weights, ``lpips.py``) LPIPS.

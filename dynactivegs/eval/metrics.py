@@ -31,7 +31,7 @@ class Metrics:
     """The metrics of one map at one step (DESIGN.md §6). Distances in cm, ratios in %."""
 
     step: int
-    acc_cm: float                 # recon -> GT mean nearest distance
+    acc_cm: float                 # recon -> visible surface mean distance
     comp_cm: float                # GT -> recon mean nearest distance
     cr_pct: float                 # % of GT points within cr_threshold_cm of the recon
     cr_threshold_cm: float
