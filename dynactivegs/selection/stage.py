@@ -117,7 +117,8 @@ class SelectionConfig:
     bump_radius_m: float = 0.25
     """A robot that did not move at all between two steps with an unreached target was blocked (it bumped into
     something the camera cannot see, or waited for a person): the disc of this radius one step ahead is marked
-    occupied in the grid (later frames clear it like any other cell) and the graph is rebuilt."""
+    occupied in the grid, with an obstacle top of occupancy.clear_below_m (so only rays passing lower than
+    that clear it: the floor seen beyond it from farther away), and the graph is rebuilt."""
     forward_step_m: float = 0.25
     """The robot's forward step (match RobotConfig.forward_step_m): where the bump disc is centred."""
 
@@ -268,7 +269,11 @@ def _at_target(cfg: SelectionConfig, target: Target, robot_xy: np.ndarray, yaw_r
 
 
 def _mark_bump(cfg: SelectionConfig, grid: OccupancyGrid, centre_xy: np.ndarray) -> OccupancyGrid:
-    """The grid with the cells of a disc of ``bump_radius_m`` at ``centre_xy`` set to the occupied clamp."""
+    """The grid with the cells of a disc of ``bump_radius_m`` at ``centre_xy`` set to the occupied clamp.
+
+    The obstacle's height is unknown (the camera did not see it: it is low and near), so the
+    cells get an obstacle top of ``occupancy.clear_below_m``: rays passing over it do not clear
+    them, only rays that pass lower (the floor seen beyond from farther away) do."""
     r = cfg.bump_radius_m
     grid = grid.grown_to_include(centre_xy - r, centre_xy + r, cfg.occupancy.grow_chunk_m)
     lo = grid.world_to_cell(centre_xy - r)
@@ -279,7 +284,9 @@ def _mark_bump(cfg: SelectionConfig, grid: OccupancyGrid, centre_xy: np.ndarray)
     ij = ij[(np.hypot(*(c - centre_xy).T) <= r) & grid.in_bounds(ij)]
     logodds = grid.logodds.copy()
     logodds[ij[:, 0], ij[:, 1]] = np.float32(cfg.occupancy.logodds_max)
-    return OccupancyGrid(grid.origin_ij, grid.cell_m, logodds, grid.top_m)
+    top = grid.top_m.copy()
+    top[ij[:, 0], ij[:, 1]] = np.maximum(top[ij[:, 0], ij[:, 1]], np.float32(cfg.occupancy.clear_below_m))
+    return OccupancyGrid(grid.origin_ij, grid.cell_m, logodds, top)
 
 
 # ---------------------------------------------------------------------------------------------- choosing
