@@ -63,6 +63,6 @@ def test_centre_points_of_an_rgbd_map_lie_on_the_ground_truth_surface(evaluator)
     rec = evaluator.recon_points(g, "centres")
     assert rec.method == "centres" and "centres" in rec.description
     m = evaluator.evaluate(g, step=0, trajectory_xy_m=None, method="centres", backend="cpu")
-    # Centres are exact surface points: Acc is the ground truth's own sampling spacing (~2 cm at 50k points here).
-    assert m.acc_cm < 3.0 and m.recon_method == "centres"
+    # Centres are exact surface points, and Acc is measured to the surface (not to the ~2 cm spaced samples).
+    assert m.acc_cm < 0.5 and m.recon_method == "centres"
     assert not math.isnan(m.comp_cm)
