@@ -238,6 +238,18 @@ def _worker(spec: RunSpec, torch_threads: int | None) -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------------------------------- the sweep
+def _die_with_parent() -> None:
+    """Pool initializer: on Linux the worker is sent SIGTERM when the dagsbench process dies, so a
+    killed sweep leaves no workers running; elsewhere a no-op."""
+    import ctypes
+    import signal
+
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))   # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
 def run_local(specs: list[RunSpec], workers: int) -> Iterator[dict[str, Any]]:
     """Results of ``specs`` as they finish, on ``workers`` processes (in this process when 1)."""
     if workers <= 1:
@@ -247,7 +259,8 @@ def run_local(specs: list[RunSpec], workers: int) -> Iterator[dict[str, Any]]:
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
-    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
+                             initializer=_die_with_parent) as pool:
         futures = [pool.submit(_worker, spec, 1) for spec in specs]
         for f in as_completed(futures):
             yield f.result()

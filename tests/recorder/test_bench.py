@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
+from pathlib import Path
 
 import pytest
 
@@ -122,3 +124,33 @@ def test_two_runs_through_a_local_ray_instance(finished, tmp_path, capsys):
         assert r["mcap"] is None and len(r["checkpoints"]) == 4
         assert not (out / "runs" / p / "tiny-00-seed0.mcap").exists()
     assert (out / "main.md").is_file()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signal is Linux-only")
+def test_killing_dagsbench_leaves_no_pool_workers(tmp_path):
+    cmd = [sys.executable, "-m", "recorder.bench", "--presets", "baseline", "--suite", "tiny-00", "--seeds", "0,1",
+           "--steps", "2000", "--workers", "2", "--out", str(tmp_path / "out"), "--no-mcap", "--no-progress"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    def children() -> list[int]:
+        out = subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True, text=True).stdout
+        return [int(x) for x in out.split()]
+
+    deadline = time.monotonic() + 60
+    while len(children()) < 2 and time.monotonic() < deadline:
+        time.sleep(0.5)
+    workers = children()
+    assert len(workers) >= 2, "the pool did not start"
+    time.sleep(3)                                           # let the workers run their initializer
+    proc.terminate()
+    proc.wait(timeout=30)
+    def alive(pid: int) -> bool:                            # a zombie waiting to be reaped is not running
+        try:
+            return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+        except (FileNotFoundError, ProcessLookupError):
+            return False
+
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline and any(alive(w) for w in workers):
+        time.sleep(0.2)
+    assert not any(alive(w) for w in workers)
