@@ -112,8 +112,9 @@ def next_action(pose: RobotPose2D, waypoints_xy_m: np.ndarray, target_yaw_rad: f
     Waypoints up to the last one within ``reach_tol_m`` of the robot are taken as reached, and so
     is one the robot is already alongside the next segment of. Then: turn toward the farthest
     waypoint whose chord from the robot stays within ``radius_m`` of the waypoints it skips,
-    until the heading error is at most ``cfg.forward_tol_deg`` (or half a turn step), go forward; with all waypoints reached, turn to ``target_yaw_rad`` (the shorter way) and
-    STOP once within half a turn step (``None``: STOP at once). ``prefer_turn``: the turn the
+    until the heading error is at most ``cfg.forward_tol_deg`` (or half a turn step), go forward;
+    with all waypoints reached, turn to ``target_yaw_rad`` (the shorter way) and STOP once
+    within half a turn step (``None``: STOP at once). ``prefer_turn``: the turn the
     robot just took; it is kept for heading errors above ``cfg.turn_commit_deg`` the other way.
     """
     commit = math.radians(cfg.turn_commit_deg)

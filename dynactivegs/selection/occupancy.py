@@ -324,7 +324,7 @@ def _trace_free(start_g, start_z, end_g, end_z, end_free, top_m, clear_below, se
                     seen_free[i, j] = True
                 break
             t_out = min(tmx, tmy, 1.0)
-            low = start_z + min(t_in, t_out) * dz if dz >= 0 else start_z + max(t_in, t_out) * dz
+            low = start_z + min(t_in * dz, t_out * dz)             # the ray is straight: lowest at an end
             if 0 <= i < h and 0 <= j < w and (top_m[i, j] <= 0.0 or low < max(top_m[i, j], clear_below)):
                 seen_free[i, j] = True
             t_in = t_out
@@ -339,12 +339,16 @@ def _trace_free(start_g, start_z, end_g, end_z, end_free, top_m, clear_below, se
         seen_free[ci0, cj0] = True
 
 
+def _occupied_cells(rays: FrameRays) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) int64 of the cells holding the frame's static obstacle returns, in ray order."""
+    e = rays.end_g[rays.end_occupied]
+    return np.floor(e[:, 1]).astype(np.int64), np.floor(e[:, 0]).astype(np.int64)
+
+
 def obstacle_tops(top_m: np.ndarray, rays: FrameRays) -> np.ndarray:
     """float32 (H, W): ``top_m`` raised to this frame's static obstacle returns (their heights)."""
-    e = rays.end_g[rays.end_occupied]
-    ij = (np.floor(e[:, 1]).astype(np.int64), np.floor(e[:, 0]).astype(np.int64))
     top = top_m.copy()
-    np.maximum.at(top, ij, rays.end_z_m[rays.end_occupied].astype(np.float32))
+    np.maximum.at(top, _occupied_cells(rays), rays.end_z_m[rays.end_occupied].astype(np.float32))
     return top
 
 
@@ -357,8 +361,7 @@ def seen_masks(shape: tuple[int, int], rays: FrameRays, top_m: np.ndarray,
                 np.ascontiguousarray(rays.end_z_m, dtype=np.float64), rays.end_free,
                 np.ascontiguousarray(top_m, dtype=np.float32), float(clear_below_m), seen_free)
     seen_occ = np.zeros(shape, np.bool_)
-    e = rays.end_g[rays.end_occupied]
-    seen_occ[np.floor(e[:, 1]).astype(np.int64), np.floor(e[:, 0]).astype(np.int64)] = True
+    seen_occ[_occupied_cells(rays)] = True
     return seen_free, seen_occ
 
 
