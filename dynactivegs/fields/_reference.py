@@ -50,7 +50,7 @@ def update_voxels_reference(cfg: FieldsConfig, state: FieldsState, depth_m: np.n
                 if surface:
                     e = float(e_res[i, j, k])
                     e_res[i, j, k] = np.float32(e + cfg.e_rate * wgt * (float(residual[row, col]) - e))
-                sample = b if surface else 0.0
+                sample = max(b - cfg.beta_static, 0.0) if surface else 0.0
                 u_m[i, j, k] = np.float32((1.0 - cfg.a_m) * float(u_m[i, j, k]) + cfg.a_m * sample)
     return FieldsState(state.origin_ijk, n_obs, e_res, u_m), visible
 

@@ -5,7 +5,7 @@
   turned into the next discrete action").
 - :func:`forward_blocked`: whether the next forward move would run into something seen in
   the current depth frame (people included, whatever their uncertainty): points in the body's
-  height band inside the rectangle the robot's disc sweeps in one step.
+  height band inside the rectangle the robot's disc sweeps in one step (:func:`forward_hits`).
 - :class:`StuckState` / :func:`update_stuck`: the robot has not left a small disc for k steps
   (blocked by a person in a doorway, turning back and forth), so the caller should pick
   another target.
@@ -158,20 +158,16 @@ def next_action(pose: RobotPose2D, waypoints_xy_m: np.ndarray, target_yaw_rad: f
     return PathStep(Action.FORWARD if turn is None else turn, k)
 
 
-def forward_blocked(depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, cfg: ActionConfig,
-                    stride: int = 1) -> bool:
-    """Whether one forward step would hit something seen in this depth frame.
+def forward_hits(depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, cfg: ActionConfig,
+                 stride: int = 1) -> np.ndarray:
+    """int64 flat pixel indices (row-major into (H, W)) of the returns one forward step would hit.
 
     The camera is assumed to sit above the robot's centre (its position projected to the
     floor) looking along the robot's heading (its optical axis projected to the floor).
-    Blocking points: height in ``[band_lo_m, band_hi_m]``, ahead by ``(0, forward_step + radius]``
+    Hits: height in ``[band_lo_m, band_hi_m]``, ahead by ``(0, forward_step + radius]``
     and at most ``radius`` to either side. ``depth_m`` float32 (H, W), 0 = no return.
-
-    The camera sees nothing below its lower field-of-view edge near the robot (at 1.25 m and
-    60 deg vertical FOV, only points above ~1 m are visible 0.4 m ahead), so low obstacles
-    must come from the occupancy map; this check catches walls and people.
     """
-    pts, _ = backproject(depth_m, K, T_world_cam, stride)
+    pts, pix = backproject(depth_m, K, T_world_cam, stride)
     fwd = T_world_cam[:2, 2].astype(np.float64)
     norm = math.hypot(fwd[0], fwd[1])
     assert norm > 1e-6, "camera looks straight up or down"
@@ -183,7 +179,18 @@ def forward_blocked(depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray,
     z = pts[:, 2]
     hit = ((z >= cfg.band_lo_m) & (z <= cfg.band_hi_m) & (ahead > 0.0)
            & (ahead <= cfg.forward_step_m + cfg.radius_m) & (np.abs(side) <= cfg.radius_m))
-    return int(hit.sum()) >= cfg.min_blocking_points
+    return pix[hit]
+
+
+def forward_blocked(depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, cfg: ActionConfig,
+                    stride: int = 1) -> bool:
+    """Whether one forward step would hit something seen in this depth frame (:func:`forward_hits`).
+
+    The camera sees nothing below its lower field-of-view edge near the robot (at 1.25 m and
+    60 deg vertical FOV, only points above ~1 m are visible 0.4 m ahead), so low obstacles
+    must come from the occupancy map; this check catches walls and people.
+    """
+    return len(forward_hits(depth_m, K, T_world_cam, cfg, stride)) >= cfg.min_blocking_points
 
 
 @dataclass(frozen=True, slots=True)

@@ -21,8 +21,9 @@ Per step:
 5. Local collision check: a forward move that the current depth frame says would hit
    something (:func:`~dynactivegs.planning.actions.forward_blocked`), or a forward move at
    the previous step that did not move the robot (a bump), blocks: the spot is penalised,
-   the path is re-planned at once, and if the next move is still a blocked forward move the
-   robot waits (STOP) for the way to clear.
+   the path is re-planned at once. If the next move is still a forward move into what the
+   depth frame shows, the robot first turns to aim exactly at its waypoint, then waits (STOP)
+   for the way to clear; a spot only remembered re-routes the path but never makes it wait.
 
 No dead-locks: ``PlanningOut.stuck`` reports the robot has not left a small disc for
 ``actions.stuck_steps`` steps with an unreached target; the selection stage applies the
@@ -33,7 +34,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -246,8 +247,15 @@ def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
             k, planned_step, replanned = 0, now, True
             ps = next_action(pose, path, sel.target_yaw_rad, acfg, prefer)
             action, k = ps.action, ps.next_waypoint
-            if action == Action.FORWARD:
-                action = Action.STOP                       # the way is still blocked: wait for it to clear
+            if action == Action.FORWARD and seen_block:
+                # Still forward into what the camera sees. First aim exactly (a step at up to
+                # forward_tol_deg off can graze a door jamb the aligned step clears), then wait.
+                action = next_action(pose, path, sel.target_yaw_rad, replace(acfg, forward_tol_deg=0.0),
+                                     prefer).action
+                if action == Action.FORWARD:
+                    action = Action.STOP                   # the way is still blocked: wait for it to clear
+            # A block only remembered (nothing seen ahead now) re-routes but never makes the robot
+            # wait: a forward move into it that fails is a bump, which renews it.
         if len(path) == 0:
             action = Action.TURN_LEFT                      # no path to the target: look around
 

@@ -29,7 +29,8 @@ so it detects the lack of progress itself: the robot has not left a disc of
 ``stuck_move_tol_m`` for ``stuck_steps`` steps while it had an unreached target (e.g. a
 person stands in a doorway). The planner's ``PlanningOut.stuck`` applies the same rule to
 report it; with equal parameters the two agree. A target given up as stuck, unreachable or
-timed out (and, for ``frontier`` and ``random``, one reached) is banned for ``ban_steps``.
+timed out (and, for ``frontier`` and ``random``, one reached) is banned for ``ban_steps``; for the
+scored variants a reached view bans the views overlapping it (``reached_ban_deg``).
 
 Visit counts (eq. 10): the robot's positions of all past steps are kept in the state;
 ``P_visit(R_k)`` is the mean over R_k's nodes of the number of past positions within
@@ -48,8 +49,9 @@ from scipy.spatial import cKDTree
 
 from dynactivegs.errors import check_config
 from dynactivegs.fields.project import FloorMap, motion_floor_map
+from dynactivegs.planning.actions import ActionConfig, forward_hits
 from dynactivegs.planning.paths import dijkstra, edge_cost
-from dynactivegs.records import FieldsOut, SelectionOut, StepRecord, robot_pose_of
+from dynactivegs.records import FieldsOut, Frame, SelectionOut, StepRecord, robot_pose_of
 from dynactivegs.selection.occupancy import OccupancyConfig, OccupancyGrid, update_occupancy
 from dynactivegs.selection.subregions import SubregionConfig, Subregions, cluster_subregions
 from dynactivegs.selection.visibility import VisibilityConfig, bin_gains, occluder_grid, view_gains
@@ -114,9 +116,15 @@ class SelectionConfig:
     """A given-up target (and, for frontier/random, a reached one) is not chosen again for this many steps ..."""
     ban_radius_m: float = 0.5
     """... nor any node within this distance of it."""
+    reached_ban_deg: float = 45.0
+    """Scored variants: a reached view is not chosen again for ban_steps, nor any view within ban_radius_m of it
+    heading within this many degrees of it (half the field of view: the views it overlaps most). Without it a
+    robot can alternate between two overlapping views at one spot, each gaining a little over the other."""
     bump_radius_m: float = 0.25
-    """A robot that did not move at all between two steps with an unreached target was blocked (it bumped into
-    something the camera cannot see, or waited for a person): the disc of this radius one step ahead is marked
+    """A robot that did not move at all between two steps with an unreached target, and sees nothing moving
+    (beta above occupancy.beta_max) in the rectangle its next forward step sweeps (else it waited for it), was
+    blocked by an obstacle (one the camera cannot see, low and near, or a static one it sees and the grid missed):
+    the disc of this radius one step ahead is marked
     occupied in the grid, with an obstacle top of occupancy.clear_below_m (so only rays passing lower than
     that clear it: the floor seen beyond it from farther away), and the graph is rebuilt."""
     forward_step_m: float = 0.25
@@ -142,6 +150,8 @@ class SelectionConfig:
         check_config(self.target_timeout_steps >= 1, "selection.target_timeout_steps", self.target_timeout_steps, ">= 1")
         check_config(self.ban_steps >= 0, "selection.ban_steps", self.ban_steps, ">= 0")
         check_config(self.ban_radius_m >= 0.0, "selection.ban_radius_m", self.ban_radius_m, ">= 0 m")
+        check_config(0.0 <= self.reached_ban_deg <= 180.0, "selection.reached_ban_deg", self.reached_ban_deg,
+                     "in [0, 180] deg")
         check_config(self.bump_radius_m >= 0.0, "selection.bump_radius_m", self.bump_radius_m, ">= 0 m")
         check_config(self.forward_step_m > 0.0, "selection.forward_step_m", self.forward_step_m, "> 0 m")
 
@@ -187,7 +197,7 @@ class SelectionState:
     history_xy_m: np.ndarray      # float64 (T, 2) the robot's position at every step so far
     stuck_anchor_xy_m: tuple[float, float] | None
     stuck_count: int
-    banned: tuple[tuple[float, float, int], ...]   # (x, y, banned until this step)
+    banned: tuple[tuple[float, float, int, float], ...]   # (x, y, banned until this step, yaw; nan: every yaw)
     scores: Scores
     last_pose: tuple[float, float, float] | None   # (x, y, yaw) at the previous step
 
@@ -236,11 +246,18 @@ def _nearest(xy_nodes: np.ndarray, xy: np.ndarray) -> tuple[int, float]:
     return i, float(d[i])
 
 
-def _banned_mask(cfg: SelectionConfig, xy_nodes: np.ndarray, banned, now: int) -> np.ndarray:
-    mask = np.zeros(len(xy_nodes), bool)
-    for x, y, until in banned:
+def _banned_views(cfg: SelectionConfig, xy_nodes: np.ndarray, banned, now: int) -> np.ndarray:
+    """bool (N, n_yaws): candidate views banned now (a ban with yaw nan covers every heading at its nodes)."""
+    yaws = cfg.visibility.yaws_rad
+    mask = np.zeros((len(xy_nodes), len(yaws)), bool)
+    for x, y, until, yaw in banned:
         if until > now:
-            mask |= np.hypot(xy_nodes[:, 0] - x, xy_nodes[:, 1] - y) <= cfg.ban_radius_m
+            near = np.hypot(xy_nodes[:, 0] - x, xy_nodes[:, 1] - y) <= cfg.ban_radius_m
+            if math.isnan(yaw):
+                heading = np.ones(len(yaws), bool)
+            else:
+                heading = np.abs(wrap_angle(yaws - yaw)) <= math.radians(cfg.reached_ban_deg) + 1e-9
+            mask |= near[:, None] & heading[None, :]
     return mask
 
 
@@ -266,6 +283,16 @@ def _fields_arrays(fields: FieldsOut | None, rec: StepRecord):
 def _at_target(cfg: SelectionConfig, target: Target, robot_xy: np.ndarray, yaw_rad: float) -> bool:
     return (math.hypot(robot_xy[0] - target.xy_m[0], robot_xy[1] - target.xy_m[1]) <= cfg.reach_tol_m
             and abs(wrap_angle(target.yaw_rad - yaw_rad)) <= math.radians(cfg.reach_yaw_deg))
+
+
+def _moving_ahead(cfg: SelectionConfig, frame: Frame, beta: np.ndarray) -> bool:
+    """Whether the rectangle of the robot's next forward step holds something moving: enough returns, most
+    of them with beta above ``occupancy.beta_max`` (the pixels that never become obstacles). A majority, not
+    a count: a wall filling the rectangle has thousands of returns, a tenth of them above that beta."""
+    acfg = ActionConfig(forward_step_m=cfg.forward_step_m)
+    hits = forward_hits(frame.depth_m, frame.K, frame.T_world_cam, acfg)
+    moving = int((beta.reshape(-1)[hits] > cfg.occupancy.beta_max).sum())
+    return moving >= acfg.min_blocking_points and 2 * moving > len(hits)
 
 
 def _mark_bump(cfg: SelectionConfig, grid: OccupancyGrid, centre_xy: np.ndarray) -> OccupancyGrid:
@@ -304,7 +331,9 @@ def _turning_rad(xy: np.ndarray, yaws: np.ndarray, robot_xy: np.ndarray, robot_y
 def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, arrays: GraphArrays, regions: Subregions,
                  robot_node: int, robot_xy: np.ndarray, robot_yaw: float, fmap: FloorMap | None, banned: np.ndarray,
                  history: np.ndarray, graph_step: int) -> tuple[Target | None, int, Scores]:
-    """Scored variants: candidate views at every reachable node, eqs. (7)-(10); returns (target, node, scores)."""
+    """Scored variants: candidate views at every reachable node, eqs. (7)-(10); returns (target, node, scores).
+
+    ``banned`` bool (N, n_yaws): views that may not be chosen (their score is -inf)."""
     vis = cfg.visibility
     xy_nodes = node_xy(state_graph)
     full = cfg.variant == "full"
@@ -314,7 +343,7 @@ def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, a
         travel, _ = _path_lengths(arrays, robot_node, edge_cost(arrays.length_m, um_e, cfg.motion_weight))   # eq. (11)
     else:
         travel = length_d
-    reach = np.isfinite(length_d) & ~banned
+    reach = np.isfinite(length_d) & ~banned.all(axis=1)
     nodes = np.nonzero(reach)[0]
     fa = _fields_arrays(rec.fields, rec)
     ny = cfg.visibility.n_yaws
@@ -333,7 +362,7 @@ def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, a
     # the view the robot already has is not a new target
     here = (np.hypot(*(xy_nodes[nodes] - robot_xy).T) <= cfg.reach_tol_m)[:, None] & \
         (np.abs((yaws[None, :] - robot_yaw + np.pi) % (2 * np.pi) - np.pi) <= math.radians(cfg.reach_yaw_deg))
-    score = np.where(here, -np.inf, score)
+    score = np.where(here | banned[nodes], -np.inf, score)
     scores = Scores(graph_step, np.repeat(nodes, ny).astype(np.int32), np.tile(yaws, len(nodes)), gain.ravel(),
                     risk.ravel(), cost.ravel(), score.ravel())
     if len(nodes) == 0 or not np.isfinite(score).any():
@@ -423,8 +452,13 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
     robot_xy = np.array([pose.x_m, pose.y_m])
     grid = update_occupancy(state.grid, cfg.occupancy, f.depth_m, f.K, f.T_world_cam, rec.perception.beta)
     lp = state.last_pose
+    # A robot that kept its pose with an unreached target was blocked: by something it cannot see
+    # (low and near), by something static it sees, or it waited for something moving it sees
+    # (the planner stops for it). Only the first two are obstacles to mark, or every wait for
+    # a passing person would leave one behind.
     bumped = (state.target is not None and lp is not None and lp == (float(pose.x_m), float(pose.y_m), float(pose.yaw_rad))
-              and not _at_target(cfg, state.target, robot_xy, pose.yaw_rad))
+              and not _at_target(cfg, state.target, robot_xy, pose.yaw_rad)
+              and not _moving_ahead(cfg, f, rec.perception.beta))
     if bumped and cfg.bump_radius_m > 0:
         grid = _mark_bump(cfg, grid, robot_xy + cfg.forward_step_m * np.array([math.cos(pose.yaw_rad),
                                                                                  math.sin(pose.yaw_rad)]))
@@ -465,14 +499,17 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
         else:
             reason = "keep"
     if reason in ("unreachable", "stuck", "timeout") or (reason == "reached" and cfg.variant in ("frontier", "random")):
-        banned = banned + ((target.xy_m[0], target.xy_m[1], now + cfg.ban_steps),)
+        banned = banned + ((target.xy_m[0], target.xy_m[1], now + cfg.ban_steps, math.nan),)
+    elif reason == "reached":
+        banned = banned + ((target.xy_m[0], target.xy_m[1], now + cfg.ban_steps, target.yaw_rad),)
 
     scores = state.scores
     mode = "keep"
     if reason != "keep":
         target, target_node, scores = None, -1, Scores.empty(graph_step)
         if robot_node >= 0:
-            ban_mask = _banned_mask(cfg, xy_nodes, banned, now)
+            ban_views = _banned_views(cfg, xy_nodes, banned, now)
+            ban_mask = ban_views.all(axis=1)
             if cfg.variant == "frontier":
                 target, target_node = _choose_frontier(G, arrays, robot_node, robot_xy, pose.yaw_rad, ban_mask,
                                                        cfg.reach_tol_m)
@@ -480,7 +517,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
                 target, target_node = _choose_random(cfg, G, arrays, robot_node, robot_xy, ban_mask, rng)
             else:
                 target, target_node, scores = _score_views(cfg, rec, G, arrays, regions, robot_node, robot_xy,
-                                                           pose.yaw_rad, fmap, ban_mask, history, graph_step)
+                                                           pose.yaw_rad, fmap, ban_views, history, graph_step)
         if target is not None:
             target = Target(target.xy_m, target.yaw_rad, target.mode, now)
             mode = target.mode

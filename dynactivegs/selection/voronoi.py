@@ -55,7 +55,11 @@ class VoronoiConfig:
     """How the Voronoi graph of the known free space is built."""
 
     robot_radius_m: float = 0.18
-    """The free space is eroded by this radius before skeletonizing (the robot's disc must fit)."""
+    """The robot's radius: the free space is eroded by it plus ``margin_m`` before skeletonizing."""
+    margin_m: float = 0.04
+    """Clearance kept beyond the robot's radius. Discrete actions cannot steer a disc through a gap a few
+    centimetres wider than it (a 10 deg heading error moves a 0.25 m step 4 cm sideways): a robot that squeezed
+    through such a door was blocked by its jambs on the way back and stayed in that room."""
     node_spacing_m: float = 0.75
     """Chains longer than this get intermediate nodes about this far apart."""
     min_spur_m: float = 0.5
@@ -73,6 +77,7 @@ class VoronoiConfig:
 
     def __post_init__(self) -> None:
         check_config(0.0 <= self.robot_radius_m <= 2.0, "voronoi.robot_radius_m", self.robot_radius_m, "in [0, 2] m")
+        check_config(0.0 <= self.margin_m <= 1.0, "voronoi.margin_m", self.margin_m, "in [0, 1] m")
         check_config(self.node_spacing_m > 0.0, "voronoi.node_spacing_m", self.node_spacing_m, "> 0 m")
         check_config(self.min_spur_m >= 0.0, "voronoi.min_spur_m", self.min_spur_m, ">= 0 m")
         check_config(self.frontier_dist_m >= 0.0, "voronoi.frontier_dist_m", self.frontier_dist_m, ">= 0 m")
@@ -287,7 +292,7 @@ def build_voronoi_graph(free: np.ndarray, unknown: np.ndarray, cell_m: float, or
     assert origin.shape == (2,)
     G = nx.Graph(cell_m=float(cell_m), origin_xy_m=origin.copy(), shape=tuple(free.shape))
     clear = clearance_m(free, cell_m)
-    trav = free & (clear >= cfg.robot_radius_m)
+    trav = free & (clear >= cfg.robot_radius_m + cfg.margin_m)
     if not trav.any():
         return G
     skel = skeletonize(trav)

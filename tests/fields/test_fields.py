@@ -93,11 +93,16 @@ def test_motion_uncertainty_rises_on_the_person_and_stays_low_on_the_walls():
     person = _voxel_value(out, out.u_m, (2.95, 2.0, 1.2))          # the person's front face
     wall = _voxel_value(out, out.u_m, (5.95, 1.0, 1.2))             # the far wall, beside the person
     free = _voxel_value(out, out.u_m, (2.0, 2.0, 1.2))              # free space in front of the person
-    assert person > 1.5 and wall < 0.15 and free < 0.05
-    # eq. 5 with a = 0.2 and beta = 2 for 10 frames: 2 * (1 - 0.8^10)
-    assert person == pytest.approx(2.0 * (1 - 0.8 ** 10), rel=1e-5)
+    assert person > 1.0 and wall == 0.0 and free < 0.05             # the wall's beta 0.1 is below beta_static
+    # eq. 5 with a = 0.2 and beta - beta_static = 2 - 0.75 for 10 frames: 1.25 * (1 - 0.8^10)
+    assert person == pytest.approx((2.0 - cfg.beta_static) * (1 - 0.8 ** 10), rel=1e-5)
     # the person's pixels count only ~(0.3 / 2)^2 of an observation: U_s stays high there
     assert _voxel_value(out, out.n_obs, (2.95, 2.0, 1.2)) < 0.3
+    # the literal eq. 5 (beta_static 0): the wall's U_m is its beta
+    lit, state = FieldsConfig(beta_static=0.0), init_state(cfg)
+    for t in range(10):
+        state, out = step(lit, _rec(T, depth, beta, step_i=t), state, derive_rng(0, "fields", t))
+    assert _voxel_value(out, out.u_m, (5.95, 1.0, 1.2)) == pytest.approx(0.1 * (1 - 0.8 ** 10), rel=1e-5)
     assert _voxel_value(out, out.n_obs, (5.95, 1.0, 1.2)) == pytest.approx(10.0)
     assert _voxel_value(out, out.u_s, (5.95, 1.0, 1.2)) == pytest.approx(1 / math.sqrt(11), rel=1e-5)
     # behind the person nothing is visible: never observed, U_s at its maximum l_c / sqrt(eps)

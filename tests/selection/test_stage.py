@@ -245,7 +245,7 @@ def test_turning_radians_of_a_view():
     assert t[2] == pytest.approx([0.0, math.pi / 2, math.pi])                 # here: the yaw change alone
 
 
-def test_a_remembered_block_expires_instead_of_renewing_itself():
+def test_a_remembered_block_reroutes_but_never_makes_the_robot_wait():
     from tests.planning.test_paths import CELL as PCELL, box
     from dynactivegs.selection.voronoi import VoronoiConfig, build_voronoi_graph
     free = np.zeros((60, 190), bool)
@@ -257,17 +257,20 @@ def test_a_remembered_block_expires_instead_of_renewing_itself():
     start = sel.node_xy_m[int(np.argmin(np.hypot(*(sel.node_xy_m - [1.5, 1.5]).T)))]
     yaw = math.atan2(sel.target_xy_m[1] - start[1], sel.target_xy_m[0] - start[0])
     ahead = start + 0.43 * np.array([math.cos(yaw), math.sin(yaw)])
-    state = planning.init_state(cfg)
-    state = dataclasses.replace(state, blocks=((float(ahead[0]), float(ahead[1]), cfg.block_hold_steps),))
-    actions = []
-    for t in range(cfg.block_hold_steps + 5):                         # the robot stays put: nothing moves
-        rec = StepRecord(frame=blind_frame(float(start[0]), float(start[1]), yaw, step=t), fields=fo,
-                         selection=sel, mapping=mo)
-        state, out = planning.step(cfg, rec, state, derive_rng(0, "p", t))
-        actions.append(out.action)
-    # nothing is seen ahead (the frames have no returns): once the remembered block expires it goes on
-    assert actions[0] == Action.STOP
-    assert Action.FORWARD in actions[cfg.block_hold_steps:]
+    remembered = ((float(ahead[0]), float(ahead[1]), cfg.block_hold_steps),)
+    state = dataclasses.replace(planning.init_state(cfg), blocks=remembered)
+    rec = StepRecord(frame=blind_frame(float(start[0]), float(start[1]), yaw, step=0), fields=fo, selection=sel,
+                     mapping=mo)
+    state, out = planning.step(cfg, rec, state, derive_rng(0, "p", 0))
+    # nothing is seen ahead (the frame has no returns): the block re-routes, but the only way is
+    # ahead, so the robot tries it rather than wait for a spot it only remembers
+    assert out.blocked and out.replanned and out.action == Action.FORWARD
+    assert state.blocks == remembered                                  # and memory alone did not renew it
+    # the try failed (the robot is where it was): that bump is fresh evidence and renews the block
+    rec = StepRecord(frame=blind_frame(float(start[0]), float(start[1]), yaw, step=1), fields=fo, selection=sel,
+                     mapping=mo)
+    state, out = planning.step(cfg, rec, state, derive_rng(0, "p", 1))
+    assert len(state.blocks) == 2 and state.blocks[-1][2] == 1 + cfg.block_hold_steps
 
 
 def test_a_bump_stays_in_the_grid_under_rays_passing_high_over_it():
@@ -288,3 +291,92 @@ def test_a_bump_stays_in_the_grid_under_rays_passing_high_over_it():
     for _ in range(10):
         g = update_occupancy(g, with_old_rule, depth, K, view(0.4, 1.0, 0.0), np.zeros_like(depth))
     assert not g.occupied(with_old_rule)[tuple(g.world_to_cell(np.array([1.0, 1.0])))]   # every ray clears
+
+
+def test_a_ban_covers_the_views_near_it_in_position_and_heading():
+    cfg = selection.SelectionConfig()
+    xy = np.array([[0.0, 0.0], [0.3, 0.0], [2.0, 0.0]])
+    yaws = cfg.visibility.yaws_rad                                      # 0, 45, ..., 315 deg
+    m = selection._banned_views(cfg, xy, ((0.0, 0.0, 10, 0.0),), now=5)
+    want = np.abs(((yaws + np.pi) % (2 * np.pi)) - np.pi) <= math.radians(45) + 1e-9     # 315, 0, 45 deg
+    assert (m[0] == want).all() and (m[1] == want).all() and not m[2].any()
+    assert selection._banned_views(cfg, xy, ((0.0, 0.0, 10, math.nan),), now=5)[:2].all()   # every heading
+    assert not selection._banned_views(cfg, xy, ((0.0, 0.0, 10, 0.0),), now=10).any()       # expired
+
+
+def test_a_reached_view_is_not_chosen_again_nor_the_views_it_overlaps():
+    free = three_rooms()
+    fo, mo = fields_for(free, [(3.5, 0.5, 5.5, 2.5, 1.0)], [])         # all the gain is in the robot's own room
+    cfg = selection.SelectionConfig(variant="gain_cost", subregions=SubregionConfig(cut_distance=1e6))
+    base = selection.init_state(cfg)
+    grid = OccupancyGrid((0, 0), CELL, np.where(free, -1.0, 1.0).astype(np.float32))
+    rec = StepRecord(frame=blind_frame(4.5, 1.5, 0.0), perception=PerceptionOut(np.full((H, W), 0.1, np.float32), 0.0,
+                                                                                 False), mapping=mo, fields=fo)
+    fresh = selection.SelectionState(grid, base.graph, base.arrays, base.regions, -1, None, base.history_xy_m, None, 0,
+                                     (), base.scores, None)
+    first = selection.step(cfg, rec, fresh, derive_rng(0, "sel"))[1]
+    # the robot stands at that view: it is reached, and the next choice keeps clear of it
+    x, y, yaw = float(first.target_xy_m[0]), float(first.target_xy_m[1]), float(first.target_yaw_rad)
+    rec = dataclasses.replace(rec, frame=blind_frame(x, y, yaw, step=1))
+    reached = dataclasses.replace(fresh, target=selection.Target((x, y), yaw, "local", 0))
+    state, out = selection.step(cfg, rec, reached, derive_rng(0, "sel"))
+    assert state.banned == ((x, y, 1 + cfg.ban_steps, yaw),)
+    near = math.hypot(out.target_xy_m[0] - x, out.target_xy_m[1] - y) <= cfg.ban_radius_m
+    turn = abs(math.remainder(out.target_yaw_rad - yaw, 2 * math.pi))
+    assert out.mode != "none" and not (near and turn <= math.radians(cfg.reached_ban_deg) + 1e-9)
+    # without the ban, the same state picks a view overlapping the one just reached
+    unbanned = selection.step(dataclasses.replace(cfg, reached_ban_deg=0.0), rec, reached, derive_rng(0, "sel"))[1]
+    assert (unbanned.target_xy_m[0], unbanned.target_xy_m[1], unbanned.target_yaw_rad) != \
+        (out.target_xy_m[0], out.target_xy_m[1], out.target_yaw_rad)
+
+
+def test_standing_still_before_something_moving_is_a_wait_not_a_bump():
+    free = three_rooms()
+    fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0)], [])
+    cfg = selection.SelectionConfig(variant="gain_cost")
+    base = selection.init_state(cfg)
+    grid = OccupancyGrid((0, 0), CELL, np.where(free, -1.0, 1.0).astype(np.float32))
+    target = selection.Target((1.5, 1.5), math.pi, "local", 0)
+    pose = (4.5, 1.5, math.pi)
+    state = selection.SelectionState(grid, base.graph, base.arrays, base.regions, -1, target, base.history_xy_m, None,
+                                     0, (), base.scores, pose)
+    ahead = np.array([4.4, 1.5])                            # in the bump disc, between the robot and the box
+    # a person-sized box 0.3 m ahead of the camera
+    depth, which = render_depth(view(*pose), K, W, H, (9.0, 3.0), [(4.05, 1.3, 4.2, 1.7, 1.8)])
+    frame = Frame(1, 1, np.zeros((H, W, 3), np.uint8), depth, K.copy(), view(*pose))
+
+    def marked(beta_box: float, frame: Frame) -> bool:
+        beta = np.where(which == 0, beta_box, 0.1).astype(np.float32)
+        rec = StepRecord(frame=frame, perception=PerceptionOut(beta, 0.0, False), mapping=mo, fields=fo)
+        g = selection.step(cfg, rec, state, derive_rng(0, "sel"))[0].grid
+        return bool(g.occupied(cfg.occupancy)[tuple(g.world_to_cell(ahead))])
+
+    assert not marked(2.0, frame)                           # it moves (high beta): the robot waited for it
+    assert marked(0.1, frame)                               # static: an obstacle the grid had missed
+    assert marked(2.0, blind_frame(*pose, step=1))          # nothing seen: it pushed into what the camera cannot see
+
+
+def test_a_seen_block_first_makes_the_robot_aim_exactly_then_wait():
+    from tests.planning.test_paths import CELL as PCELL, box
+    from dynactivegs.selection.voronoi import VoronoiConfig, build_voronoi_graph
+    free = np.zeros((60, 190), bool)
+    box(free, 0.5, 0.5, 8.5, 2.5)
+    G = build_voronoi_graph(free, np.zeros_like(free), PCELL, np.zeros(2), VoronoiConfig())
+    sel = _selection_out_from_graph(G, (7.5, 1.5))
+    fo, mo = fields_for(np.ones((60, 190), bool), [], [])
+    cfg = planning.PlanningConfig(path=PathConfig(variant="shortest"))
+    start = sel.node_xy_m[int(np.argmin(np.hypot(*(sel.node_xy_m - [1.5, 1.5]).T)))]
+    aim = math.atan2(sel.target_xy_m[1] - start[1], sel.target_xy_m[0] - start[0])
+    wall = [(start[0] + 0.3, start[1] - 0.6, start[0] + 0.4, start[1] + 0.6, 1.8)]     # across the way, 0.3 m ahead
+
+    def act(yaw, state, t):
+        depth, _ = render_depth(view(start[0], start[1], yaw), K, W, H, (9.0, 3.0), wall)
+        frame = Frame(t, t, np.zeros((H, W, 3), np.uint8), depth, K.copy(), view(start[0], start[1], yaw))
+        return planning.step(cfg, StepRecord(frame=frame, fields=fo, selection=sel, mapping=mo), state,
+                             derive_rng(0, "p", t))
+
+    off = aim + math.radians(12.0)                    # within forward_tol_deg: it would step, but something is ahead
+    state, out = act(off, planning.init_state(cfg), 0)
+    assert out.blocked and out.action == Action.TURN_RIGHT
+    state, out = act(aim, state, 1)                   # aimed exactly and still blocked: it waits
+    assert out.blocked and out.action == Action.STOP
