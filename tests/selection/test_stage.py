@@ -380,3 +380,27 @@ def test_a_seen_block_first_makes_the_robot_aim_exactly_then_wait():
     assert out.blocked and out.action == Action.TURN_RIGHT
     state, out = act(aim, state, 1)                   # aimed exactly and still blocked: it waits
     assert out.blocked and out.action == Action.STOP
+
+
+def test_space_beyond_the_fields_grid_counts_as_unobserved():
+    # a 3 x 3 m grid, observed everywhere (U_s 0.2) but one unobserved voxel (U_s 1); the node is near its +x edge
+    shape = (20, 20, 20)
+    u_s = np.full(shape, 0.2, np.float32)
+    n_obs = np.full(shape, 4.0, np.float32)
+    u_s[0, 0, 0], n_obs[0, 0, 0] = 1.0, 0.0
+    fo = FieldsOut(np.zeros(3), VOX, u_s, np.zeros(shape, np.float32), n_obs, np.zeros(shape, bool))
+    rec = StepRecord(frame=blind_frame(2.7, 1.5, 0.0), fields=fo)
+    node = np.array([[2.7, 1.5]])
+    occ, us, um, origin, vox = selection._fields_arrays(fo, rec, node, 4.0)
+    assert us.shape[0] > shape[0] and origin[0] < 0.0 and origin[1] < 0.0       # grown to the node's range
+    outside = np.floor((np.array([5.0, 1.5, 1.2]) - origin) / vox).astype(int)
+    below = np.floor((np.array([5.0, 1.5, -0.5]) - origin) / vox).astype(int) if origin[2] < 0 else None
+    assert us[tuple(outside)] == pytest.approx(1.0) and not occ[tuple(outside)] and um[tuple(outside)] == 0.0
+    assert below is None or us[tuple(below)] == 0.0
+    cfg = selection.SelectionConfig()
+    from dynactivegs.selection.visibility import bin_gains, view_gains
+    g_out = view_gains(cfg.visibility, bin_gains(cfg.visibility, occ, us, um, origin, vox, node)[0])[0]
+    g_in = view_gains(cfg.visibility, bin_gains(cfg.visibility, *selection._fields_arrays(fo, rec, np.zeros((0, 2)), 4.0)[:3],
+                                                np.zeros(3), VOX, node)[0])[0]
+    assert g_out[0] > 2 * g_in[0]                # facing +x, out of the grid: far more to see than inside it
+    assert g_out[0] > g_out[4]                   # facing -x, back over the observed grid: less
