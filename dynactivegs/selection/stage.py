@@ -127,9 +127,12 @@ class SelectionConfig:
     """A robot that did not move at all between two steps with an unreached target, and sees nothing moving
     (beta above occupancy.beta_max) in the rectangle its next forward step sweeps (else it waited for it), was
     blocked by an obstacle (one the camera cannot see, low and near, or a static one it sees and the grid missed):
-    the disc of this radius one step ahead is marked
-    occupied in the grid, with an obstacle top of occupancy.clear_below_m (so only rays passing lower than
-    that clear it: the floor seen beyond it from farther away), and the graph is rebuilt."""
+    the disc of this radius one step ahead is occupied in the graph's grid for bump_hold_steps, with an
+    obstacle top of occupancy.clear_below_m, and the graph is rebuilt."""
+    bump_hold_steps: int = 100
+    """How long a bump disc is kept. It is not written into the occupancy grid for good: a person who stepped
+    into the robot's way between two frames also reads as a bump, and a disc for good in a corridor split the
+    graph for the rest of a run. A real obstacle is bumped into again and marked again."""
     forward_step_m: float = 0.25
     """The robot's forward step (match RobotConfig.forward_step_m): where the bump disc is centred."""
 
@@ -157,6 +160,7 @@ class SelectionConfig:
                      "in [0, 180] deg")
         check_config(self.bump_radius_m >= 0.0, "selection.bump_radius_m", self.bump_radius_m, ">= 0 m")
         check_config(self.forward_step_m > 0.0, "selection.forward_step_m", self.forward_step_m, "> 0 m")
+        check_config(self.bump_hold_steps >= 0, "selection.bump_hold_steps", self.bump_hold_steps, ">= 0")
 
 
 @dataclass(frozen=True, slots=True)
@@ -203,6 +207,7 @@ class SelectionState:
     banned: tuple[tuple[float, float, int, float], ...]   # (x, y, banned until this step, yaw; nan: every yaw)
     scores: Scores
     last_pose: tuple[float, float, float] | None   # (x, y, yaw) at the previous step
+    bumps: tuple[tuple[float, float, int], ...] = ()   # (x, y, kept until this step): bump discs' centres
 
     def __post_init__(self) -> None:
         self.history_xy_m.flags.writeable = False
@@ -486,17 +491,22 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
     bumped = (state.target is not None and lp is not None and lp == (float(pose.x_m), float(pose.y_m), float(pose.yaw_rad))
               and not _at_target(cfg, state.target, robot_xy, pose.yaw_rad)
               and not _moving_ahead(cfg, f, rec.perception.beta))
+    bumps = tuple(b for b in state.bumps if b[2] > now)
     if bumped and cfg.bump_radius_m > 0:
-        grid = _mark_bump(cfg, grid, robot_xy + cfg.forward_step_m * np.array([math.cos(pose.yaw_rad),
-                                                                                 math.sin(pose.yaw_rad)]))
+        centre = robot_xy + cfg.forward_step_m * np.array([math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)])
+        bumps = bumps + ((float(centre[0]), float(centre[1]), now + cfg.bump_hold_steps),)
     history = np.concatenate([state.history_xy_m, robot_xy[None]])
     fmap = motion_floor_map(rec.fields, cfg.um_band_lo_m, cfg.um_band_hi_m) if 0 not in rec.fields.u_m.shape else None
 
     # graph (amortised rebuild)
     G, arrays, regions, graph_step = state.graph, state.arrays, state.regions, state.graph_step
     _, d_near = _nearest(node_xy(G), robot_xy)
-    if graph_step < 0 or now - graph_step >= cfg.rebuild_every or d_near > cfg.rebuild_moved_m or bumped:
-        G, arrays, regions = _build_graph(cfg, grid, fmap)
+    if (graph_step < 0 or now - graph_step >= cfg.rebuild_every or d_near > cfg.rebuild_moved_m or bumped
+            or len(bumps) != len(state.bumps)):
+        graph_grid = grid
+        for x, y, _ in bumps:
+            graph_grid = _mark_bump(cfg, graph_grid, np.array([x, y]))
+        G, arrays, regions = _build_graph(cfg, graph_grid, fmap)
         graph_step = now
     xy_nodes = node_xy(G)
     robot_node, _ = _nearest(xy_nodes, robot_xy)
@@ -553,7 +563,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
             mode = "none"
 
     new_state = SelectionState(grid, G, arrays, regions, graph_step, target, history, anchor, count, banned, scores,
-                               (float(pose.x_m), float(pose.y_m), float(pose.yaw_rad)))
+                               (float(pose.x_m), float(pose.y_m), float(pose.yaw_rad)), bumps)
     show = scores if scores.graph_step == graph_step else Scores.empty()
     if target is None:
         t_xy, t_yaw, t_node = robot_xy.copy(), float(pose.yaw_rad), -1

@@ -348,12 +348,19 @@ def test_standing_still_before_something_moving_is_a_wait_not_a_bump():
     def marked(beta_box: float, frame: Frame) -> bool:
         beta = np.where(which == 0, beta_box, 0.1).astype(np.float32)
         rec = StepRecord(frame=frame, perception=PerceptionOut(beta, 0.0, False), mapping=mo, fields=fo)
-        g = selection.step(cfg, rec, state, derive_rng(0, "sel"))[0].grid
-        return bool(g.occupied(cfg.occupancy)[tuple(g.world_to_cell(ahead))])
+        bumps = selection.step(cfg, rec, state, derive_rng(0, "sel"))[0].bumps
+        return len(bumps) == 1 and math.hypot(bumps[0][0] - ahead[0], bumps[0][1] - ahead[1]) < cfg.bump_radius_m
 
     assert not marked(2.0, frame)                           # it moves (high beta): the robot waited for it
     assert marked(0.1, frame)                               # static: an obstacle the grid had missed
     assert marked(2.0, blind_frame(*pose, step=1))          # nothing seen: it pushed into what the camera cannot see
+    # a bump disc is kept for bump_hold_steps, then dropped (a person who stepped in the way reads as one too)
+    bumped = selection.step(cfg, StepRecord(frame=blind_frame(*pose, step=1), perception=PerceptionOut(
+        np.full((H, W), 0.1, np.float32), 0.0, False), mapping=mo, fields=fo), state, derive_rng(0, "sel"))[0]
+    later = dataclasses.replace(bumped, last_pose=None)
+    moved = StepRecord(frame=blind_frame(3.0, 1.5, math.pi, step=1 + cfg.bump_hold_steps),
+                       perception=PerceptionOut(np.full((H, W), 0.1, np.float32), 0.0, False), mapping=mo, fields=fo)
+    assert selection.step(cfg, moved, later, derive_rng(0, "sel"))[0].bumps == ()
 
 
 def test_a_seen_block_first_makes_the_robot_aim_exactly_then_wait():
