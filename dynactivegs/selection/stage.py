@@ -78,8 +78,11 @@ class SelectionConfig:
     small next to I_s (U_m is beta above the static level, on the few voxels people were seen at): over the
     views scored in a 600-step run, I_s had median 0.61 and R_m 90th percentile 0.019, so at 30 a view among
     the 10 % most exposed to people loses about a median view's gain."""
-    l_c: float = 1.0
-    """lambda_c of eq. (7): weight of the travel cost C (gain per metre of path)."""
+    l_c: float = 0.3
+    """lambda_c of eq. (7): weight of the travel cost C (gain per metre of path). A frontier view typically
+    gains 5-10 (uncertainty x m^3) and lies 5-15 m away along the graph; at 1.0 the robot kept choosing
+    views a metre away that gained under 1. Measured with full on apartment-01 / -03 (600 steps): C.R.
+    44.1 / 64.1 % at 1.0, 45.9 / 66.6 % at 0.3."""
     turn_cost_m: float = 1.43
     """C of eq. (7) counts turning as travel: metres of path one radian of turning costs (a turn step
     takes as long as a forward step: 0.25 m per 10 deg is 1.43 m/rad); 0 counts the path length only."""

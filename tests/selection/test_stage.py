@@ -96,7 +96,8 @@ def test_the_target_behind_a_busy_corridor_loses_under_full_and_wins_under_stati
     picks = {}
     for variant in ("static_gain", "gain_cost", "full"):
         # the robot faces R: leave turning out of C so that only the corridor's motion sets the rooms apart
-        cfg = selection.SelectionConfig(variant=variant, subregions=one_region, local_threshold=-1e9, turn_cost_m=0.0)
+        cfg = selection.SelectionConfig(variant=variant, subregions=one_region, local_threshold=-1e9, turn_cost_m=0.0,
+                                        l_r=1.0, l_c=1.0)
         out = select_once(cfg, free, fo, mo, (4.5, 1.5))
         assert out.mode in ("local", "global") and out.target_node >= 0
         assert len(out.cand_score) == len(out.cand_node) > 0
@@ -307,7 +308,7 @@ def test_a_ban_covers_the_views_near_it_in_position_and_heading():
 def test_a_reached_view_is_not_chosen_again_nor_the_views_it_overlaps():
     free = three_rooms()
     fo, mo = fields_for(free, [(3.5, 0.5, 5.5, 2.5, 1.0)], [])         # all the gain is in the robot's own room
-    cfg = selection.SelectionConfig(variant="gain_cost", subregions=SubregionConfig(cut_distance=1e6))
+    cfg = selection.SelectionConfig(variant="gain_cost", subregions=SubregionConfig(cut_distance=1e6), l_c=1.0)
     base = selection.init_state(cfg)
     grid = OccupancyGrid((0, 0), CELL, np.where(free, -1.0, 1.0).astype(np.float32))
     rec = StepRecord(frame=blind_frame(4.5, 1.5, 0.0), perception=PerceptionOut(np.full((H, W), 0.1, np.float32), 0.0,
