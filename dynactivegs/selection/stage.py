@@ -333,9 +333,10 @@ def _moving_ahead(cfg: SelectionConfig, frame: Frame, beta: np.ndarray) -> bool:
 def _mark_bump(cfg: SelectionConfig, grid: OccupancyGrid, centre_xy: np.ndarray) -> OccupancyGrid:
     """The grid with the cells of a disc of ``bump_radius_m`` at ``centre_xy`` set to the occupied clamp.
 
-    The obstacle's height is unknown (the camera did not see it: it is low and near), so the
-    cells get an obstacle top of ``occupancy.clear_below_m``: rays passing over it do not clear
-    them, only rays that pass lower (the floor seen beyond from farther away) do."""
+    The obstacle's height is unknown, so the cells get an obstacle top of
+    ``occupancy.clear_below_m``: in a grid that kept integrating frames, rays passing over the
+    disc would not clear it. :func:`step` marks its bump discs on a copy of the grid for each
+    graph build, so they last ``bump_hold_steps`` whatever the rays do."""
     r = cfg.bump_radius_m
     grid = grid.grown_to_include(centre_xy - r, centre_xy + r, cfg.occupancy.grow_chunk_m)
     lo = grid.world_to_cell(centre_xy - r)
