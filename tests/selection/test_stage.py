@@ -246,7 +246,9 @@ def test_turning_radians_of_a_view():
     assert t[2] == pytest.approx([0.0, math.pi / 2, math.pi])                 # here: the yaw change alone
 
 
-def test_a_remembered_block_reroutes_but_never_makes_the_robot_wait():
+def _one_room_way_ahead():
+    """One 8 x 2 m room, a target at its far end, the shortest-path planner, and the robot at the graph node
+    nearest (1.5, 1.5): (selection out, fields, mapping, planning config, start xy, yaw toward the target)."""
     from tests.planning.test_paths import CELL as PCELL, box
     from dynactivegs.selection.voronoi import VoronoiConfig, build_voronoi_graph
     free = np.zeros((60, 190), bool)
@@ -256,7 +258,11 @@ def test_a_remembered_block_reroutes_but_never_makes_the_robot_wait():
     fo, mo = fields_for(np.ones((60, 190), bool), [], [])
     cfg = planning.PlanningConfig(path=PathConfig(variant="shortest"))
     start = sel.node_xy_m[int(np.argmin(np.hypot(*(sel.node_xy_m - [1.5, 1.5]).T)))]
-    yaw = math.atan2(sel.target_xy_m[1] - start[1], sel.target_xy_m[0] - start[0])
+    return sel, fo, mo, cfg, start, math.atan2(sel.target_xy_m[1] - start[1], sel.target_xy_m[0] - start[0])
+
+
+def test_a_remembered_block_reroutes_but_never_makes_the_robot_wait():
+    sel, fo, mo, cfg, start, yaw = _one_room_way_ahead()
     ahead = start + 0.43 * np.array([math.cos(yaw), math.sin(yaw)])
     remembered = ((float(ahead[0]), float(ahead[1]), cfg.block_hold_steps),)
     state = dataclasses.replace(planning.init_state(cfg), blocks=remembered)
@@ -365,16 +371,7 @@ def test_standing_still_before_something_moving_is_a_wait_not_a_bump():
 
 
 def test_a_seen_block_first_makes_the_robot_aim_exactly_then_wait():
-    from tests.planning.test_paths import CELL as PCELL, box
-    from dynactivegs.selection.voronoi import VoronoiConfig, build_voronoi_graph
-    free = np.zeros((60, 190), bool)
-    box(free, 0.5, 0.5, 8.5, 2.5)
-    G = build_voronoi_graph(free, np.zeros_like(free), PCELL, np.zeros(2), VoronoiConfig())
-    sel = _selection_out_from_graph(G, (7.5, 1.5))
-    fo, mo = fields_for(np.ones((60, 190), bool), [], [])
-    cfg = planning.PlanningConfig(path=PathConfig(variant="shortest"))
-    start = sel.node_xy_m[int(np.argmin(np.hypot(*(sel.node_xy_m - [1.5, 1.5]).T)))]
-    aim = math.atan2(sel.target_xy_m[1] - start[1], sel.target_xy_m[0] - start[0])
+    sel, fo, mo, cfg, start, aim = _one_room_way_ahead()
     wall = [(start[0] + 0.3, start[1] - 0.6, start[0] + 0.4, start[1] + 0.6, 1.8)]     # across the way, 0.3 m ahead
 
     def act(yaw, state, t):
