@@ -40,6 +40,11 @@ class ActionConfig:
     """The robot's collision radius (match RobotConfig.radius_m)."""
     reach_tol_m: float = 0.15
     """A waypoint within this distance counts as reached; keep it above half the forward step so a step never overshoots it back and forth."""
+    target_tol_m: float = 0.3
+    """The last waypoint, the target position, counts as reached within this distance (match selection.reach_tol_m,
+    within which selection counts the target reached): the robot just turns to the target's heading there. At
+    reach_tol_m it drove to a target 0.2 m behind it (a half turn, a step, a half turn back) for a view it could
+    have had by turning on the spot."""
     band_lo_m: float = 0.1
     """Depth points lower than this above the floor do not block (floor)."""
     band_hi_m: float = 1.5
@@ -63,6 +68,8 @@ class ActionConfig:
         check_config(0.0 < self.radius_m <= 1.0, "actions.radius_m", self.radius_m, "in (0, 1] m")
         check_config(0.5 * self.forward_step_m < self.reach_tol_m, "actions.reach_tol_m", self.reach_tol_m,
                  "above half of actions.forward_step_m")
+        check_config(self.target_tol_m >= self.reach_tol_m, "actions.target_tol_m", self.target_tol_m,
+                     ">= actions.reach_tol_m")
         check_config(0.0 <= self.forward_tol_deg <= 45.0, "actions.forward_tol_deg", self.forward_tol_deg,
                      "in [0, 45] deg")
         check_config(0.0 <= self.turn_commit_deg <= 180.0, "actions.turn_commit_deg", self.turn_commit_deg,
@@ -110,7 +117,8 @@ def next_action(pose: RobotPose2D, waypoints_xy_m: np.ndarray, target_yaw_rad: f
     """The next discrete action to follow ``waypoints_xy_m`` (K, 2) and end facing ``target_yaw_rad``.
 
     Waypoints up to the last one within ``reach_tol_m`` of the robot are taken as reached, and so
-    is one the robot is already alongside the next segment of. Then: turn toward the farthest
+    is one the robot is already alongside the next segment of; all are once the last one is within
+    ``target_tol_m``. Then: turn toward the farthest
     waypoint whose chord from the robot stays within ``radius_m`` of the waypoints it skips,
     until the heading error is at most ``cfg.forward_tol_deg`` (or half a turn step), go forward;
     with all waypoints reached, turn to ``target_yaw_rad`` (the shorter way) and STOP once
@@ -123,6 +131,8 @@ def next_action(pose: RobotPose2D, waypoints_xy_m: np.ndarray, target_yaw_rad: f
     d = np.hypot(wp[:, 0] - pose.x_m, wp[:, 1] - pose.y_m)
     within = np.nonzero(d <= cfg.reach_tol_m)[0]
     k = int(within[-1]) + 1 if len(within) else 0
+    if len(wp) and d[-1] <= cfg.target_tol_m:
+        k = len(wp)
     # Already alongside the segment wp[k] -> wp[k+1]: skip wp[k] rather than turn back to it
     # (the nearest graph node is often behind a robot that is between two nodes).
     xy = np.array([pose.x_m, pose.y_m])

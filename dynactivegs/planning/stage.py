@@ -13,8 +13,9 @@ Per step:
    (length only), ``dyn_edge`` (current U_m), ``dyn_edge_temporal`` (the eq. 13 average).
    Edges passing within ``block_radius_m`` of a place where the robot was recently blocked
    cost ``block_penalty_m`` more.
-3. The path is re-planned (Dijkstra from the node nearest the robot to the target node,
-   then the target position) when the target or graph changed, the robot was blocked, or
+3. The path is re-planned (Dijkstra from the target node; the path starts at the node near
+   the robot with the cheapest way there counting the turns, :func:`_source`, and ends at the
+   target position) when the target or graph changed, the robot was blocked, or
    ``replan_every`` steps passed; otherwise the robot keeps following the stored path.
 4. The next discrete action (:func:`dynactivegs.planning.actions.next_action`): turn toward
    the next waypoint, forward when aligned, final turn to the target yaw, STOP at the target.
@@ -41,10 +42,10 @@ import numpy as np
 from dynactivegs.errors import check_config
 from dynactivegs.fields.project import FloorMap, motion_floor_map, segment_means
 from dynactivegs.planning.actions import ActionConfig, StuckState, forward_blocked, is_stuck, next_action, update_stuck
-from dynactivegs.planning.paths import PathConfig, ema_update, shortest_path, variant_edge_cost
+from dynactivegs.planning.paths import PathConfig, dijkstra, ema_update, variant_edge_cost
 from dynactivegs.records import PlanningOut, SelectionOut, StepRecord, robot_pose_of
 from dynactivegs.selection.voronoi import GraphArrays
-from dynactivegs.sim.robot import Action
+from dynactivegs.sim.robot import Action, wrap_angle
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,6 +72,11 @@ class PlanningConfig:
     """A blocked spot is remembered for this many steps."""
     bump_tol_m: float = 0.05
     """A forward action after which the robot moved less than this was blocked (a bump)."""
+    source_radius_m: float = 1.0
+    """The path may start at any node within this distance of the robot and three graph hops of the nearest
+    node; the one with the cheapest path counting the way there and the turns (metres of forward steps a
+    turn takes as long as) wins. 0: always the nearest node, which is often behind a robot between
+    nodes, and a rebuilt graph whose routes swap back and forth makes it turn on the spot."""
 
     def __post_init__(self) -> None:
         check_config(self.um_band_lo_m < self.um_band_hi_m, "planning.um_band_lo_m", self.um_band_lo_m,
@@ -78,6 +84,7 @@ class PlanningConfig:
         check_config(self.sample_spacing_m > 0.0, "planning.sample_spacing_m", self.sample_spacing_m, "> 0 m")
         check_config(self.replan_every >= 1, "planning.replan_every", self.replan_every, ">= 1")
         check_config(self.block_penalty_m >= 0.0, "planning.block_penalty_m", self.block_penalty_m, ">= 0")
+        check_config(self.source_radius_m >= 0.0, "planning.source_radius_m", self.source_radius_m, ">= 0 m")
         check_config(self.block_radius_m >= 0.0, "planning.block_radius_m", self.block_radius_m, ">= 0 m")
         check_config(self.block_hold_steps >= 0, "planning.block_hold_steps", self.block_hold_steps, ">= 0")
         check_config(0.0 < self.bump_tol_m < self.actions.forward_step_m, "planning.bump_tol_m", self.bump_tol_m,
@@ -152,8 +159,44 @@ def _block_ahead(blocks, robot_xy: np.ndarray, fwd: np.ndarray, acfg: ActionConf
     return False
 
 
+def _source(cfg: PlanningConfig, sel: SelectionOut, arrays: GraphArrays, to_target: np.ndarray, pred: np.ndarray,
+            robot_xy: np.ndarray, robot_yaw: float) -> int:
+    """The node the path starts at (-1: the target is unreachable from near the robot).
+
+    Candidates: the nearest node, and the nodes within ``source_radius_m`` of the robot at most three
+    graph hops from it (a node that close and more hops away could lie behind a wall). Each costs the
+    straight way to it, the turns (toward it, then onto its next edge; a turn step is worth one
+    forward step) and its eq. (11) cost to the target."""
+    d = np.hypot(*(sel.node_xy_m - robot_xy).T)
+    near = int(np.argmin(d))
+    cand = {near}
+    if cfg.source_radius_m > 0.0:
+        ring = {near}
+        for _ in range(3):
+            ring = {int(w) for a in ring for w in np.concatenate([arrays.v[arrays.u == a], arrays.u[arrays.v == a]])}
+            cand |= {w for w in ring if d[w] <= cfg.source_radius_m}
+    acfg = cfg.actions
+    per_rad = acfg.forward_step_m / math.radians(acfg.turn_step_deg)
+    best, best_cost = -1, math.inf
+    for s in sorted(cand):
+        if not math.isfinite(to_target[s]):
+            continue
+        heading = robot_yaw
+        turn = 0.0
+        if d[s] > acfg.reach_tol_m:
+            bearing = math.atan2(*(sel.node_xy_m[s] - robot_xy)[::-1])
+            turn, heading = abs(wrap_angle(bearing - heading)), bearing
+        nxt = int(pred[s])
+        if nxt >= 0:
+            turn += abs(wrap_angle(math.atan2(*(sel.node_xy_m[nxt] - sel.node_xy_m[s])[::-1]) - heading))
+        total = float(d[s]) + per_rad * turn + float(to_target[s])
+        if total < best_cost - 1e-9:
+            best, best_cost = s, total
+    return best
+
+
 def _plan(cfg: PlanningConfig, sel: SelectionOut, now_map: FloorMap | None, ema_map: FloorMap | None,
-          blocks, robot_xy: np.ndarray) -> tuple[np.ndarray, float]:
+          blocks, robot_xy: np.ndarray, robot_yaw: float) -> tuple[np.ndarray, float]:
     """Waypoints (P, 2) from the robot to the target and the path's eq. (11) cost; (empty, nan) without a path."""
     n = len(sel.node_xy_m)
     if n == 0 or sel.target_node < 0:
@@ -171,11 +214,13 @@ def _plan(cfg: PlanningConfig, sel: SelectionOut, now_map: FloorMap | None, ema_
         if len(u):
             near = _segment_point_dist(np.array([x, y]), a, b) <= cfg.block_radius_m
             cost = cost + np.where(near, cfg.block_penalty_m, 0.0)
-    d = np.hypot(*(sel.node_xy_m - robot_xy).T)
-    source = int(np.argmin(d))
-    nodes, total = shortest_path(arrays, np.maximum(cost, 1e-9), source, int(sel.target_node))
-    if not nodes:
+    to_target, pred = dijkstra(arrays, np.maximum(cost, 1e-9), int(sel.target_node))   # undirected: costs to the target
+    source = _source(cfg, sel, arrays, to_target, pred, robot_xy, robot_yaw)
+    if source < 0:
         return np.zeros((0, 2)), math.nan
+    nodes, total = [source], float(to_target[source])
+    while nodes[-1] != int(sel.target_node):
+        nodes.append(int(pred[nodes[-1]]))
     wp = sel.node_xy_m[nodes]
     # start from the second node when the robot is already between the first two
     if len(wp) >= 2 and np.hypot(*(robot_xy - wp[1])) <= np.hypot(*(wp[0] - wp[1])):
@@ -229,7 +274,7 @@ def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
     else:
         if (new_target or gkey != state.graph_key or bumped or len(path) == 0
                 or now - planned_step >= cfg.replan_every):
-            path, cost = _plan(cfg, sel, now_map, ema_map, blocks, robot_xy)
+            path, cost = _plan(cfg, sel, now_map, ema_map, blocks, robot_xy, pose.yaw_rad)
             k, planned_step, replanned = 0, now, True
         prefer = Action(state.last_action) if state.last_action in (int(Action.TURN_LEFT), int(Action.TURN_RIGHT)) \
             else None
@@ -243,7 +288,7 @@ def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
                 # only fresh evidence starts or renews a block: one remembered block must not renew
                 # itself every step, or the robot waits in front of it forever
                 blocks = blocks + ((float(ahead[0]), float(ahead[1]), now + cfg.block_hold_steps),)
-            path, cost = _plan(cfg, sel, now_map, ema_map, blocks, robot_xy)
+            path, cost = _plan(cfg, sel, now_map, ema_map, blocks, robot_xy, pose.yaw_rad)
             k, planned_step, replanned = 0, now, True
             ps = next_action(pose, path, sel.target_yaw_rad, acfg, prefer)
             action, k = ps.action, ps.next_waypoint

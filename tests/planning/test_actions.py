@@ -69,7 +69,7 @@ def test_following_an_l_shaped_path_with_the_simulator_actions_arrives_facing_th
             break
         pose = apply_action(pose, step.action, robot)
     assert actions[-1] == Action.STOP and len(actions) < 60
-    assert math.hypot(pose.x_m - 2.6, pose.y_m - 2.0) <= cfg.reach_tol_m
+    assert math.hypot(pose.x_m - 2.6, pose.y_m - 2.0) <= cfg.target_tol_m
     assert abs(wrap_angle(pose.yaw_rad - math.radians(45))) <= math.radians(5) + 1e-9
     # no dithering: never a left turn right after a right turn or vice versa
     pairs = set(zip(actions[:-1], actions[1:]))
@@ -130,3 +130,13 @@ def test_small_zig_zags_of_the_skeleton_are_cut_straight():
     corner = [[1.0, 0.0], [1.0, 1.0]]
     assert act(0, 0, 0, corner).action == Action.FORWARD
     assert act(0, 0, 30, corner).action == Action.TURN_RIGHT
+
+
+def test_a_target_within_target_tol_is_turned_to_on_the_spot():
+    # the target position 0.2 m behind the robot, its heading 20 deg to the right: turn right, do not drive back
+    assert act(0, 0, 0, [[-0.2, 0.01]], -20).action == Action.TURN_RIGHT
+    assert act(0, 0, -18, [[-0.2, 0.01]], -20).action == Action.STOP
+    assert next_action(RobotPose2D(0.0, 0.0, 0.0), np.array([[-0.2, 0.01]]), math.radians(-20),
+                       ActionConfig(target_tol_m=CFG.reach_tol_m)).action == Action.TURN_LEFT   # drives to it
+    with pytest.raises(ConfigError, match="target_tol_m"):
+        ActionConfig(target_tol_m=0.1)

@@ -175,3 +175,23 @@ def test_config_validation():
         PathConfig(ema_gamma=0.0)
     with pytest.raises(ConfigError):
         PathConfig(motion_weight=-1.0)
+
+
+def test_the_path_starts_at_the_node_ahead_not_at_the_nearest_one_behind():
+    import math
+    from dynactivegs.planning import stage as planning
+    from dynactivegs.planning.paths import dijkstra
+    from dynactivegs.selection.voronoi import GraphArrays
+    xy = np.array([[0.5 * i, 0.0] for i in range(7)])            # a chain along +x; the target is its last node
+    u, v = np.arange(6), np.arange(1, 7)
+    arrays = GraphArrays(7, u, v, np.full(6, 0.5), np.zeros(7, np.int64), np.zeros((0, 2), np.int64))
+    to_target, pred = dijkstra(arrays, arrays.length_m, 6)
+
+    class Sel:
+        node_xy_m = xy
+    robot = np.array([0.35, 0.15])                                # nearest is node 1 (0.21 m), behind and to the right
+    cfg = planning.PlanningConfig()
+    assert planning._source(cfg, Sel, arrays, to_target, pred, robot, 0.0) == 2                 # facing +x: ahead
+    assert planning._source(planning.PlanningConfig(source_radius_m=0.0), Sel, arrays, to_target, pred, robot, 0.0) == 1
+    to_start, pred0 = dijkstra(arrays, arrays.length_m, 0)        # the target at the other end, behind the robot
+    assert planning._source(cfg, Sel, arrays, to_start, pred0, robot, math.pi) == 0
