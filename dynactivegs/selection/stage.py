@@ -54,7 +54,8 @@ from dynactivegs.planning.paths import dijkstra, edge_cost
 from dynactivegs.records import FieldsOut, Frame, SelectionOut, StepRecord, robot_pose_of
 from dynactivegs.selection.occupancy import OccupancyConfig, OccupancyGrid, update_occupancy
 from dynactivegs.selection.subregions import SubregionConfig, Subregions, cluster_subregions
-from dynactivegs.selection.visibility import VisibilityConfig, bin_gains, occluder_grid, view_gains
+from dynactivegs.selection.visibility import (VisibilityConfig, bin_gains, column_occluders, occluder_grid,
+                                               view_gains)
 from dynactivegs.selection.voronoi import GraphArrays, VoronoiConfig, graph_arrays, graph_from_occupancy, node_xy
 from dynactivegs.sim.robot import wrap_angle
 
@@ -366,10 +367,11 @@ def _turning_rad(xy: np.ndarray, yaws: np.ndarray, robot_xy: np.ndarray, robot_y
 
 def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, arrays: GraphArrays, regions: Subregions,
                  robot_node: int, robot_xy: np.ndarray, robot_yaw: float, fmap: FloorMap | None, banned: np.ndarray,
-                 history: np.ndarray, graph_step: int) -> tuple[Target | None, int, Scores]:
+                 history: np.ndarray, graph_step: int, grid: OccupancyGrid) -> tuple[Target | None, int, Scores]:
     """Scored variants: candidate views at every reachable node, eqs. (7)-(10); returns (target, node, scores).
 
-    ``banned`` bool (N, n_yaws): views that may not be chosen (their score is -inf)."""
+    ``banned`` bool (N, n_yaws): views that may not be chosen (their score is -inf). Occluders: the map's
+    surface and the obstacle columns of the occupancy ``grid`` (:func:`column_occluders`)."""
     vis = cfg.visibility
     xy_nodes = node_xy(state_graph)
     full = cfg.variant == "full"
@@ -388,6 +390,9 @@ def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, a
         risk = np.zeros((len(nodes), ny))
     else:
         occ, u_s, u_m, origin, voxel = fa
+        cells = np.argwhere(grid.occupied(cfg.occupancy))
+        occ = occ | column_occluders(grid.cell_to_world(cells), grid.top_m[cells[:, 0], cells[:, 1]].astype(np.float64),
+                                     cfg.occupancy.band_hi_m - voxel, origin, voxel, occ.shape)   # walls: top in the band's top voxel
         gs, gm = bin_gains(vis, occ, u_s, u_m, origin, voxel, xy_nodes[nodes])
         gain, risk = view_gains(vis, gs), view_gains(vis, gm)                      # eqs. (8), (9)
     yaws = vis.yaws_rad
@@ -558,7 +563,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
                 target, target_node = _choose_random(cfg, G, arrays, robot_node, robot_xy, ban_mask, rng)
             else:
                 target, target_node, scores = _score_views(cfg, rec, G, arrays, regions, robot_node, robot_xy,
-                                                           pose.yaw_rad, fmap, ban_views, history, graph_step)
+                                                           pose.yaw_rad, fmap, ban_views, history, graph_step, grid)
         if target is not None:
             target = Target(target.xy_m, target.yaw_rad, target.mode, now)
             mode = target.mode

@@ -107,6 +107,29 @@ def occluder_grid(surface_ijk: np.ndarray, surface_voxel_m: float, origin_m: np.
     return occ
 
 
+def column_occluders(xy_m: np.ndarray, top_m: np.ndarray, wall_top_m: float, origin_m: np.ndarray, voxel_m: float,
+                     shape: tuple[int, int, int]) -> np.ndarray:
+    """bool (X, Y, Z): query voxels holding part of an obstacle column of the 2D occupancy grid.
+
+    A column stands at ``xy_m`` (K, 2) from the floor (z = 0) to its top ``top_m`` (K,); one whose
+    top reaches ``wall_top_m`` (the top of the height band the grid records) is a wall of unknown
+    height and fills every voxel above the floor. The map's surface misses parts of walls (one too
+    close to the camera returns no depth), and through those holes a view at the edge of the
+    explored part kept seeing the unknown space behind the house's outer walls.
+    """
+    assert xy_m.ndim == 2 and xy_m.shape[1] == 2 and top_m.shape == (len(xy_m),)
+    if len(xy_m) == 0 or 0 in shape:
+        return np.zeros(shape, np.bool_)
+    origin_m = np.asarray(origin_m, np.float64)
+    ij = np.floor((xy_m - origin_m[:2]) / voxel_m).astype(np.int64)
+    ok = np.all((ij >= 0) & (ij < np.array(shape[:2])), axis=1)
+    top = np.full(shape[:2], -np.inf)
+    np.maximum.at(top, (ij[ok, 0], ij[ok, 1]), np.where(top_m[ok] >= wall_top_m, np.inf, top_m[ok]))
+    z_lo = origin_m[2] + np.arange(shape[2]) * voxel_m                       # bottom of each voxel layer
+    eps = 1e-6 * voxel_m                                                      # layers that merely touch do not count
+    return (z_lo + voxel_m > eps)[None, None, :] & (z_lo[None, None, :] < top[:, :, None] - eps)   # layer meets [0, top)
+
+
 @numba.njit(cache=True, nogil=True)
 def _bin_gains(occ, u_s, u_m, origin, voxel, cams, n_az, n_el, half_vfov, range_m, margin, soft):  # pragma: no cover
     n_nodes = cams.shape[0]

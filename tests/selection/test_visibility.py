@@ -9,7 +9,7 @@ import pytest
 from dynactivegs.errors import ConfigError
 from dynactivegs.rng import derive_rng
 from dynactivegs.selection._reference import view_gain_reference
-from dynactivegs.selection.visibility import VisibilityConfig, bin_gains, occluder_grid, view_gains
+from dynactivegs.selection.visibility import VisibilityConfig, bin_gains, column_occluders, occluder_grid, view_gains
 
 
 def test_view_gains_equal_the_reference_on_seeded_random_grids():
@@ -67,6 +67,26 @@ def test_occluder_grid_bins_surface_voxels_onto_the_query_grid():
     occ = occluder_grid(ijk, 0.05, np.zeros(3), 0.15, (10, 2, 2))
     assert occ[0, 0, 0] and occ[9, 0, 0]
     assert occ.sum() == 2                                             # (30, 0, 0) is past x = 1.5 m; -5 is outside
+
+
+def test_obstacle_columns_of_the_occupancy_grid_occlude_from_the_floor_up():
+    origin, voxel, shape = np.array([0.0, 0.0, -0.3]), 0.1, (10, 10, 30)      # z from -0.3 to 2.7 m
+    xy = np.array([[0.55, 0.55], [0.56, 0.54], [0.25, 0.75], [5.0, 5.0]])
+    top = np.array([0.5, 0.7, 1.45, 1.45])                                 # one low column (two cells), one wall
+    occ = column_occluders(xy, top, 1.4, origin, voxel, shape)
+    layers = lambda i, j: np.nonzero(occ[i, j])[0]
+    assert layers(5, 5).tolist() == list(range(3, 10))                      # floor to 0.7 m, the higher of the two
+    assert layers(2, 7).tolist() == list(range(3, 30))                      # a wall: every layer above the floor
+    assert occ.sum() == 7 + 27                                              # (5, 5) m is outside the grid
+    # a wall the map's surface missed: a node next to it, facing it, sees nothing of the unknown behind it
+    cfg = VisibilityConfig(range_m=4.0)
+    room = _room(None)
+    walls = column_occluders(np.array([[1.45, y] for y in np.arange(0.05, 4.0, 0.05)]), np.full(79, 1.5), 1.4,
+                             room[3], room[4], room[0].shape)
+    node = np.array([[1.2, 2.0]])
+    open_gain = view_gains(cfg, bin_gains(cfg, room[0], *room[1:], node)[0])[0]
+    walled = view_gains(cfg, bin_gains(cfg, walls, *room[1:], node)[0])[0]
+    assert walled[0] < 0.05 * open_gain[0] and walled[cfg.n_yaws // 2] == pytest.approx(open_gain[cfg.n_yaws // 2])
 
 
 def test_bad_config_raises():
