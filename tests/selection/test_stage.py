@@ -337,7 +337,25 @@ def test_a_reached_view_is_not_chosen_again_nor_the_views_it_overlaps():
         (out.target_xy_m[0], out.target_xy_m[1], out.target_yaw_rad)
 
 
-def test_standing_still_before_something_moving_is_a_wait_not_a_bump():
+def test_an_unreachable_target_is_given_up_without_a_ban():
+    free = three_rooms()
+    fo, mo = fields_for(free, [(3.5, 0.5, 5.5, 2.5, 1.0)], [])
+    cfg = selection.SelectionConfig(variant="gain_cost")
+    base = selection.init_state(cfg)
+    grid = OccupancyGrid((0, 0), CELL, np.where(free, -1.0, 1.0).astype(np.float32))
+    rec = StepRecord(frame=blind_frame(4.5, 1.5, 0.0), perception=PerceptionOut(np.full((H, W), 0.1, np.float32), 0.0,
+                                                                                 False), mapping=mo, fields=fo)
+    lost = selection.Target((20.0, 20.0), 0.0, "global", 0)           # no graph node anywhere near it
+    state = selection.SelectionState(grid, base.graph, base.arrays, base.regions, -1, lost, base.history_xy_m, None,
+                                     0, (), base.scores, None)
+    state, out = selection.step(cfg, rec, state, derive_rng(0, "sel"))
+    assert out.mode != "keep" and state.target != lost and state.banned == ()
+    stuck = dataclasses.replace(state, stuck_count=cfg.stuck_steps, stuck_anchor_xy_m=(4.5, 1.5), last_pose=None)
+    assert len(selection.step(cfg, dataclasses.replace(rec, frame=blind_frame(4.5, 1.5, 0.0, step=1)), stuck,
+                              derive_rng(0, "sel"))[0].banned) == 1                      # a stuck one is banned
+
+
+def test_standing_still_before_something_seen_is_a_wait_not_a_bump():
     free = three_rooms()
     fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0)], [])
     cfg = selection.SelectionConfig(variant="gain_cost")
@@ -359,7 +377,7 @@ def test_standing_still_before_something_moving_is_a_wait_not_a_bump():
         return len(bumps) == 1 and math.hypot(bumps[0][0] - ahead[0], bumps[0][1] - ahead[1]) < cfg.bump_radius_m
 
     assert not marked(2.0, frame)                           # it moves (high beta): the robot waited for it
-    assert marked(0.1, frame)                               # static: an obstacle the grid had missed
+    assert not marked(0.1, frame)                           # static: the occupancy grid has it from this frame
     assert marked(2.0, blind_frame(*pose, step=1))          # nothing seen: it pushed into what the camera cannot see
     # a bump disc is kept for bump_hold_steps, then dropped (a person who stepped in the way reads as one too)
     bumped = selection.step(cfg, StepRecord(frame=blind_frame(*pose, step=1), perception=PerceptionOut(
