@@ -195,3 +195,19 @@ def test_the_path_starts_at_the_node_ahead_not_at_the_nearest_one_behind():
     assert planning._source(planning.PlanningConfig(source_radius_m=0.0), Sel, arrays, to_target, pred, robot, 0.0) == 1
     to_start, pred0 = dijkstra(arrays, arrays.length_m, 0)        # the target at the other end, behind the robot
     assert planning._source(cfg, Sel, arrays, to_start, pred0, robot, math.pi) == 0
+
+
+def test_a_robot_on_a_cut_off_piece_of_the_graph_starts_from_a_node_of_the_target_s_piece():
+    from dynactivegs.planning import stage as planning
+    from dynactivegs.planning.paths import dijkstra
+    from dynactivegs.selection.voronoi import GraphArrays
+    xy = np.array([[0.5 * i, 0.0] for i in range(7)] + [[1.0, 0.6], [1.5, 0.6]])   # a chain and a cut-off pair
+    u, v = np.array([0, 1, 2, 3, 4, 5, 7]), np.array([1, 2, 3, 4, 5, 6, 8])
+    arrays = GraphArrays(9, u, v, np.full(7, 0.5), np.zeros(8, np.int64), np.zeros((0, 2), np.int64))
+    to_target, pred = dijkstra(arrays, arrays.length_m, 6)
+
+    class Sel:
+        node_xy_m = xy
+    robot = np.array([1.05, 0.5])                                 # nearest is node 7, on the pair
+    assert planning._source(planning.PlanningConfig(), Sel, arrays, to_target, pred, robot, 0.0) in (2, 3)
+    assert planning._source(planning.PlanningConfig(source_radius_m=0.0), Sel, arrays, to_target, pred, robot, 0.0) == -1
