@@ -367,7 +367,7 @@ def test_an_unreachable_target_is_given_up_without_a_ban():
                               derive_rng(0, "sel"))[0].banned) == 1                      # a stuck one is banned
 
 
-def test_standing_still_before_something_seen_is_a_wait_not_a_bump():
+def test_standing_still_before_something_moving_is_a_wait_not_a_bump():
     free = three_rooms()
     fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0)], [])
     cfg = selection.SelectionConfig(variant="gain_cost")
@@ -389,7 +389,7 @@ def test_standing_still_before_something_seen_is_a_wait_not_a_bump():
         return len(bumps) == 1 and math.hypot(bumps[0][0] - ahead[0], bumps[0][1] - ahead[1]) < cfg.bump_radius_m
 
     assert not marked(2.0, frame)                           # it moves (high beta): the robot waited for it
-    assert not marked(0.1, frame)                           # static: the occupancy grid has it from this frame
+    assert marked(0.1, frame)                               # static: an obstacle the grid had missed
     assert marked(2.0, blind_frame(*pose, step=1))          # nothing seen: it pushed into what the camera cannot see
     # a bump disc is kept for bump_hold_steps, then dropped (a person who stepped in the way reads as one too)
     bumped = selection.step(cfg, StepRecord(frame=blind_frame(*pose, step=1), perception=PerceptionOut(
