@@ -2,18 +2,21 @@
 
 from __future__ import annotations
 
+import math
+
 import networkx as nx
 import numpy as np
 import pytest
 
 from dynactivegs.errors import ConfigError
+from dynactivegs.planning import stage as planning
 from dynactivegs.planning._reference import edge_mean_along_reference, shortest_path_reference
 from dynactivegs.planning.paths import (
-    PLANNER_VARIANTS, PathConfig, edge_cost, edge_mean_along, ema_update, graph_arrays, path_polyline,
+    PLANNER_VARIANTS, PathConfig, dijkstra, edge_cost, edge_mean_along, ema_update, graph_arrays, path_polyline,
     shortest_path, thin_polyline, transfer_edge_values, variant_edge_cost,
 )
 from dynactivegs.rng import derive_rng
-from dynactivegs.selection.voronoi import VoronoiConfig, build_voronoi_graph, nearest_node
+from dynactivegs.selection.voronoi import GraphArrays, VoronoiConfig, build_voronoi_graph, nearest_node
 
 CELL = 0.05
 
@@ -177,14 +180,17 @@ def test_config_validation():
         PathConfig(motion_weight=-1.0)
 
 
+def chain_graph(with_pair: bool) -> tuple[np.ndarray, GraphArrays]:
+    """(node xy, arrays): 7 nodes 0.5 m apart along +x, and with ``with_pair`` a cut-off pair of nodes 7, 8 at
+    (1.0, 0.6), (1.5, 0.6), joined to each other only."""
+    xy = [[0.5 * i, 0.0] for i in range(7)] + ([[1.0, 0.6], [1.5, 0.6]] if with_pair else [])
+    u, v = list(range(6)) + ([7] if with_pair else []), list(range(1, 7)) + ([8] if with_pair else [])
+    return np.array(xy), GraphArrays(len(xy), np.array(u), np.array(v), np.full(len(u), 0.5),
+                                     np.zeros(len(u) + 1, np.int64), np.zeros((0, 2), np.int64))
+
+
 def test_the_path_starts_at_the_node_ahead_not_at_the_nearest_one_behind():
-    import math
-    from dynactivegs.planning import stage as planning
-    from dynactivegs.planning.paths import dijkstra
-    from dynactivegs.selection.voronoi import GraphArrays
-    xy = np.array([[0.5 * i, 0.0] for i in range(7)])            # a chain along +x; the target is its last node
-    u, v = np.arange(6), np.arange(1, 7)
-    arrays = GraphArrays(7, u, v, np.full(6, 0.5), np.zeros(7, np.int64), np.zeros((0, 2), np.int64))
+    xy, arrays = chain_graph(with_pair=False)                    # the target is the chain's last node
     to_target, pred = dijkstra(arrays, arrays.length_m, 6)
 
     class Sel:
@@ -198,12 +204,7 @@ def test_the_path_starts_at_the_node_ahead_not_at_the_nearest_one_behind():
 
 
 def test_a_robot_on_a_cut_off_piece_of_the_graph_starts_from_a_node_of_the_target_s_piece():
-    from dynactivegs.planning import stage as planning
-    from dynactivegs.planning.paths import dijkstra
-    from dynactivegs.selection.voronoi import GraphArrays
-    xy = np.array([[0.5 * i, 0.0] for i in range(7)] + [[1.0, 0.6], [1.5, 0.6]])   # a chain and a cut-off pair
-    u, v = np.array([0, 1, 2, 3, 4, 5, 7]), np.array([1, 2, 3, 4, 5, 6, 8])
-    arrays = GraphArrays(9, u, v, np.full(7, 0.5), np.zeros(8, np.int64), np.zeros((0, 2), np.int64))
+    xy, arrays = chain_graph(with_pair=True)
     to_target, pred = dijkstra(arrays, arrays.length_m, 6)
 
     class Sel:

@@ -78,11 +78,17 @@ def blind_frame(x, y, yaw, step=0) -> Frame:
     return Frame(step, step, np.zeros((H, W, 3), np.uint8), np.zeros((H, W), np.float32), K.copy(), view(x, y, yaw))
 
 
-def select_once(cfg: selection.SelectionConfig, free: np.ndarray, fo: FieldsOut, mo: MappingOut, xy) -> SelectionOut:
-    state = selection.init_state(cfg)
+def state_on(cfg: selection.SelectionConfig, free: np.ndarray, target: selection.Target | None = None,
+             last_pose=None) -> selection.SelectionState:
+    """A selection state whose occupancy grid is ``free`` (free cells free, the rest occupied), before any graph."""
+    base = selection.init_state(cfg)
     grid = OccupancyGrid((0, 0), CELL, np.where(free, -1.0, 1.0).astype(np.float32))
-    state = selection.SelectionState(grid, state.graph, state.arrays, state.regions, -1, None, state.history_xy_m,
-                                     None, 0, (), state.scores, None)
+    return selection.SelectionState(grid, base.graph, base.arrays, base.regions, -1, target, base.history_xy_m, None, 0,
+                                    (), base.scores, last_pose)
+
+
+def select_once(cfg: selection.SelectionConfig, free: np.ndarray, fo: FieldsOut, mo: MappingOut, xy) -> SelectionOut:
+    state = state_on(cfg, free)
     rec = StepRecord(frame=blind_frame(*xy, 0.0), perception=PerceptionOut(np.full((H, W), 0.1, np.float32), 0.0, False),
                      mapping=mo, fields=fo)
     return selection.step(cfg, rec, state, derive_rng(0, "sel"))[1]
@@ -225,10 +231,7 @@ def test_turning_counts_as_travel_so_the_room_ahead_wins_a_tie():
     one_region = SubregionConfig(cut_distance=1e6)
     for yaw_room_x in ((0.0, 5.5), (math.pi, 3.5)):
         cfg = selection.SelectionConfig(variant="gain_cost", subregions=one_region)
-        state = selection.init_state(cfg)
-        grid = OccupancyGrid((0, 0), CELL, np.where(free, -1.0, 1.0).astype(np.float32))
-        state = selection.SelectionState(grid, state.graph, state.arrays, state.regions, -1, None,
-                                         state.history_xy_m, None, 0, (), state.scores, None)
+        state = state_on(cfg, free)
         frame = blind_frame(4.5, 1.5, yaw_room_x[0])
         rec = StepRecord(frame=frame, perception=PerceptionOut(np.full((H, W), 0.1, np.float32), 0.0, False),
                          mapping=mo, fields=fo)
@@ -315,12 +318,9 @@ def test_a_reached_view_is_not_chosen_again_nor_the_views_it_overlaps():
     free = three_rooms()
     fo, mo = fields_for(free, [(3.5, 0.5, 5.5, 2.5, 1.0)], [])         # all the gain is in the robot's own room
     cfg = selection.SelectionConfig(variant="gain_cost", subregions=SubregionConfig(cut_distance=1e6), l_c=1.0)
-    base = selection.init_state(cfg)
-    grid = OccupancyGrid((0, 0), CELL, np.where(free, -1.0, 1.0).astype(np.float32))
     rec = StepRecord(frame=blind_frame(4.5, 1.5, 0.0), perception=PerceptionOut(np.full((H, W), 0.1, np.float32), 0.0,
                                                                                  False), mapping=mo, fields=fo)
-    fresh = selection.SelectionState(grid, base.graph, base.arrays, base.regions, -1, None, base.history_xy_m, None, 0,
-                                     (), base.scores, None)
+    fresh = state_on(cfg, free)
     first = selection.step(cfg, rec, fresh, derive_rng(0, "sel"))[1]
     # the robot stands at that view: it is reached, and the next choice keeps clear of it
     x, y, yaw = float(first.target_xy_m[0]), float(first.target_xy_m[1]), float(first.target_yaw_rad)
@@ -338,10 +338,8 @@ def test_a_reached_view_is_not_chosen_again_nor_the_views_it_overlaps():
 
 
 def test_a_robot_on_a_tiny_piece_of_the_graph_is_attached_to_a_larger_piece_nearby():
-    from dynactivegs.selection.voronoi import GraphArrays
-    xy = np.array([[0.5 * i, 0.0] for i in range(7)] + [[1.0, 0.6], [1.5, 0.6]])   # a chain and a cut-off pair
-    u, v = np.array([0, 1, 2, 3, 4, 5, 7]), np.array([1, 2, 3, 4, 5, 6, 8])
-    arrays = GraphArrays(9, u, v, np.full(7, 0.5), np.zeros(8, np.int64), np.zeros((0, 2), np.int64))
+    from tests.planning.test_paths import chain_graph
+    xy, arrays = chain_graph(with_pair=True)
     cfg = selection.SelectionConfig()
     assert selection._robot_node(cfg, arrays, xy, np.array([1.05, 0.5])) == 2          # the chain's nearest node
     assert selection._robot_node(dataclasses.replace(cfg, min_piece_nodes=1), arrays, xy, np.array([1.05, 0.5])) == 7
@@ -353,13 +351,10 @@ def test_an_unreachable_target_is_given_up_without_a_ban():
     free = three_rooms()
     fo, mo = fields_for(free, [(3.5, 0.5, 5.5, 2.5, 1.0)], [])
     cfg = selection.SelectionConfig(variant="gain_cost")
-    base = selection.init_state(cfg)
-    grid = OccupancyGrid((0, 0), CELL, np.where(free, -1.0, 1.0).astype(np.float32))
     rec = StepRecord(frame=blind_frame(4.5, 1.5, 0.0), perception=PerceptionOut(np.full((H, W), 0.1, np.float32), 0.0,
                                                                                  False), mapping=mo, fields=fo)
     lost = selection.Target((20.0, 20.0), 0.0, "global", 0)           # no graph node anywhere near it
-    state = selection.SelectionState(grid, base.graph, base.arrays, base.regions, -1, lost, base.history_xy_m, None,
-                                     0, (), base.scores, None)
+    state = state_on(cfg, free, lost)
     state, out = selection.step(cfg, rec, state, derive_rng(0, "sel"))
     assert out.mode != "keep" and state.target != lost and state.banned == ()
     stuck = dataclasses.replace(state, stuck_count=cfg.stuck_steps, stuck_anchor_xy_m=(4.5, 1.5), last_pose=None)
@@ -371,12 +366,9 @@ def test_standing_still_before_something_moving_is_a_wait_not_a_bump():
     free = three_rooms()
     fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0)], [])
     cfg = selection.SelectionConfig(variant="gain_cost")
-    base = selection.init_state(cfg)
-    grid = OccupancyGrid((0, 0), CELL, np.where(free, -1.0, 1.0).astype(np.float32))
     target = selection.Target((1.5, 1.5), math.pi, "local", 0)
     pose = (4.5, 1.5, math.pi)
-    state = selection.SelectionState(grid, base.graph, base.arrays, base.regions, -1, target, base.history_xy_m, None,
-                                     0, (), base.scores, pose)
+    state = state_on(cfg, free, target, pose)
     ahead = np.array([4.4, 1.5])                            # in the bump disc, between the robot and the box
     # a person-sized box 0.3 m ahead of the camera
     depth, which = render_depth(view(*pose), K, W, H, (9.0, 3.0), [(4.05, 1.3, 4.2, 1.7, 1.8)])
