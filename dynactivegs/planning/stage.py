@@ -164,8 +164,7 @@ def _source(cfg: PlanningConfig, sel: SelectionOut, arrays: GraphArrays, to_targ
     """The node the path starts at (-1: the target is unreachable from near the robot).
 
     Candidates: the nearest node, and the nodes within ``source_radius_m`` of the robot at most three
-    graph hops from it (a node that close and more hops away could lie behind a wall); when none of them
-    leads to the target, every node within ``source_radius_m``. Each costs the
+    graph hops from it (a node that close and more hops away could lie behind a wall). Each costs the
     straight way to it, the turns (toward it, then onto its next edge; a turn step is worth one
     forward step) and its eq. (11) cost to the target."""
     d = np.hypot(*(sel.node_xy_m - robot_xy).T)
@@ -176,10 +175,6 @@ def _source(cfg: PlanningConfig, sel: SelectionOut, arrays: GraphArrays, to_targ
         for _ in range(3):
             ring = {int(w) for a in ring for w in np.concatenate([arrays.v[arrays.u == a], arrays.u[arrays.v == a]])}
             cand |= {w for w in ring if d[w] <= cfg.source_radius_m}
-    if cfg.source_radius_m > 0.0 and not any(math.isfinite(to_target[s]) for s in cand):
-        # the robot's piece of the graph does not lead to the target (a gap narrower than the graph's
-        # clearance cut it off; selection then attaches the robot to a larger piece nearby): any node close by
-        cand = {int(s) for s in np.nonzero(d <= cfg.source_radius_m)[0]}
     acfg = cfg.actions
     per_rad = acfg.forward_step_m / math.radians(acfg.turn_step_deg)
     best, best_cost = -1, math.inf

@@ -47,8 +47,6 @@ from typing import Literal, get_args
 
 import networkx as nx
 import numpy as np
-from scipy import sparse
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from dynactivegs.errors import check_config
@@ -144,14 +142,6 @@ class SelectionConfig:
     graph for the rest of a run. A real obstacle is bumped into again and marked again."""
     forward_step_m: float = 0.25
     """The robot's forward step (match RobotConfig.forward_step_m): where the bump disc is centred."""
-    min_piece_nodes: int = 5
-    """The robot's own node is the nearest one, unless that node's piece of the graph (connected component)
-    has fewer nodes than this: then it is the nearest node of the largest piece within attach_radius_m. A
-    gap narrower than the graph's clearance can cut a robot that squeezed through it off from the rest; its
-    piece of two nodes soon had every view banned and the robot turned on the spot for 75 steps."""
-    attach_radius_m: float = 0.75
-    """See min_piece_nodes; the robot stands in free space between the two pieces."""
-
     def __post_init__(self) -> None:
         check_config(self.variant in SELECTION_VARIANTS, "selection.variant", self.variant,
                      f"one of {SELECTION_VARIANTS}")
@@ -177,8 +167,6 @@ class SelectionConfig:
         check_config(self.bump_radius_m >= 0.0, "selection.bump_radius_m", self.bump_radius_m, ">= 0 m")
         check_config(self.forward_step_m > 0.0, "selection.forward_step_m", self.forward_step_m, "> 0 m")
         check_config(self.bump_hold_steps >= 0, "selection.bump_hold_steps", self.bump_hold_steps, ">= 0")
-        check_config(self.min_piece_nodes >= 1, "selection.min_piece_nodes", self.min_piece_nodes, ">= 1")
-        check_config(self.attach_radius_m >= 0.0, "selection.attach_radius_m", self.attach_radius_m, ">= 0 m")
 
 
 @dataclass(frozen=True, slots=True)
@@ -270,27 +258,6 @@ def _nearest(xy_nodes: np.ndarray, xy: np.ndarray) -> tuple[int, float]:
     d = np.hypot(xy_nodes[:, 0] - xy[0], xy_nodes[:, 1] - xy[1])
     i = int(np.argmin(d))
     return i, float(d[i])
-
-
-def _robot_node(cfg: SelectionConfig, arrays: GraphArrays, xy_nodes: np.ndarray, robot_xy: np.ndarray) -> int:
-    """The robot's node: the nearest, or, when its piece of the graph is tiny, the nearest node of the largest
-    piece within ``attach_radius_m`` (see ``SelectionConfig.min_piece_nodes``); -1 without nodes."""
-    near, _ = _nearest(xy_nodes, robot_xy)
-    if near < 0 or cfg.min_piece_nodes <= 1:
-        return near
-    adj = sparse.coo_matrix((np.ones(arrays.n_edges), (arrays.u, arrays.v)), shape=(arrays.n_nodes, arrays.n_nodes))
-    _, label = connected_components(adj, directed=False)
-    size = np.bincount(label)
-    if size[label[near]] >= cfg.min_piece_nodes:
-        return near
-    d = np.hypot(*(xy_nodes - robot_xy).T)
-    ok = d <= cfg.attach_radius_m
-    if not ok.any():
-        return near
-    best = int(np.argmax(np.where(ok, size[label], -1)))
-    if size[label[best]] <= size[label[near]]:
-        return near
-    return int(np.argmin(np.where(ok & (label == label[best]), d, np.inf)))
 
 
 def _banned_views(cfg: SelectionConfig, xy_nodes: np.ndarray, banned, now: int) -> np.ndarray:
@@ -554,7 +521,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
         G, arrays, regions = _build_graph(cfg, graph_grid, fmap)
         graph_step = now
     xy_nodes = node_xy(G)
-    robot_node = _robot_node(cfg, arrays, xy_nodes, robot_xy)
+    robot_node, _ = _nearest(xy_nodes, robot_xy)
 
     # progress (stuck detection from the pose history)
     anchor, count = state.stuck_anchor_xy_m, state.stuck_count

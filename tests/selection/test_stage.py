@@ -337,16 +337,6 @@ def test_a_reached_view_is_not_chosen_again_nor_the_views_it_overlaps():
         (out.target_xy_m[0], out.target_xy_m[1], out.target_yaw_rad)
 
 
-def test_a_robot_on_a_tiny_piece_of_the_graph_is_attached_to_a_larger_piece_nearby():
-    from tests.planning.test_paths import chain_graph
-    xy, arrays = chain_graph(with_pair=True)
-    cfg = selection.SelectionConfig()
-    assert selection._robot_node(cfg, arrays, xy, np.array([1.05, 0.5])) == 2          # the chain's nearest node
-    assert selection._robot_node(dataclasses.replace(cfg, min_piece_nodes=1), arrays, xy, np.array([1.05, 0.5])) == 7
-    assert selection._robot_node(cfg, arrays, xy, np.array([1.5, 1.4])) == 8           # nothing larger within reach
-    assert selection._robot_node(cfg, arrays, xy, np.array([2.5, 0.1])) == 5           # on the chain: its nearest
-
-
 def test_an_unreachable_target_is_given_up_without_a_ban():
     free = three_rooms()
     fo, mo = fields_for(free, [(3.5, 0.5, 5.5, 2.5, 1.0)], [])

@@ -11,11 +11,12 @@ import pytest
 from dynactivegs.errors import ConfigError
 from dynactivegs.selection.occupancy import OccupancyConfig, OccupancyGrid
 from dynactivegs.selection.voronoi import (
-    VoronoiConfig, build_voronoi_graph, graph_from_occupancy, nearest_node, node_xy, traversable_mask,
+    VoronoiConfig, build_voronoi_graph, graph_arrays, graph_from_occupancy, nearest_node, node_xy, traversable_mask,
 )
 
 CELL = 0.05
-CFG = VoronoiConfig(robot_radius_m=0.18, node_spacing_m=0.75, min_spur_m=0.5, frontier_dist_m=0.8)
+CFG_KW = dict(robot_radius_m=0.18, node_spacing_m=0.75, min_spur_m=0.5, frontier_dist_m=0.8)
+CFG = VoronoiConfig(**CFG_KW)
 ORIGIN = np.array([-1.0, 2.0])
 
 
@@ -176,3 +177,41 @@ def test_selection_and_planning_import_without_torch():
             "print('torch' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
+
+
+def room_and_pocket(gap_m: float) -> np.ndarray:
+    """A 3.3 m x 1 m corridor and a 0.6 m x 1.2 m pocket at its end, joined by a 0.3 m long passage ``gap_m`` wide:
+    narrower than the skeleton's clearance (0.44 m), so the pocket's skeleton is a piece of its own."""
+    free = np.zeros((60, 120), bool)
+    box(free, 0.2, 1.0, 3.5, 2.0)                 # the corridor
+    box(free, 3.8, 0.9, 4.4, 2.1)                 # the pocket
+    box(free, 3.5, 1.5 - gap_m / 2 + 0.01, 3.8, 1.5 + gap_m / 2 - 0.01)   # the passage
+    return free
+
+
+def test_a_tiny_piece_is_bridged_to_a_larger_one_where_the_robot_fits_the_gap():
+    free = room_and_pocket(0.40)
+    assert nx.number_connected_components(build(free, cfg=VoronoiConfig(**{**CFG_KW, "bridge_min_nodes": 1}))) == 2
+    G = build(free)
+    assert nx.is_connected(G)
+    bridges = [(u, v, d) for u, v, d in G.edges(data=True) if d.get("bridge")]
+    assert len(bridges) == 1
+    u, v, d = bridges[0]
+    xs = sorted(float(G.nodes[n]["xy"][0] - ORIGIN[0]) for n in (u, v))
+    assert xs[0] < 3.5 and xs[1] > 3.8                        # from the corridor into the pocket
+    c = d["cells"]
+    assert free[c[:, 0], c[:, 1]].all()
+    assert c[0].tolist() == list(G.nodes[u]["cell"]) and c[-1].tolist() == list(G.nodes[v]["cell"])
+    assert np.abs(np.diff(c, axis=0)).max() == 1                 # a chain of 8-neighbours
+    assert d["length_m"] == pytest.approx(np.hypot(*np.diff(c.astype(float), axis=0).T).sum() * CELL)
+    assert float(np.hypot(*(G.nodes[u]["xy"] - G.nodes[v]["xy"]))) <= d["length_m"] <= CFG.bridge_length_m
+    assert graph_arrays(G).n_edges == G.number_of_edges()
+
+
+def test_no_bridge_through_a_gap_too_narrow_or_unknown():
+    assert nx.number_connected_components(build(room_and_pocket(0.30))) == 2       # the robot's disc does not fit
+    free = room_and_pocket(0.40)
+    unknown = np.zeros_like(free)
+    box(unknown, 3.6, 1.2, 3.7, 1.8)                          # a strip of the passage the camera never saw
+    free &= ~unknown
+    assert nx.number_connected_components(build(free, unknown)) == 2
