@@ -404,7 +404,7 @@ def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, a
     score = s_view - (cfg.l_c * cost if cfg.variant in ("gain_cost", "full") else 0.0)   # eq. (7)
     # the view the robot already has is not a new target
     here = (np.hypot(*(xy_nodes[nodes] - robot_xy).T) <= cfg.reach_tol_m)[:, None] & \
-        (np.abs((yaws[None, :] - robot_yaw + np.pi) % (2 * np.pi) - np.pi) <= math.radians(cfg.reach_yaw_deg))
+        (np.abs(wrap_angle(yaws[None, :] - robot_yaw)) <= math.radians(cfg.reach_yaw_deg))
     score = np.where(here | banned[nodes], -np.inf, score)
     scores = Scores(graph_step, np.repeat(nodes, ny).astype(np.int32), np.tile(yaws, len(nodes)), gain.ravel(),
                     risk.ravel(), cost.ravel(), score.ravel())
