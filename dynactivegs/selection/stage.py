@@ -142,6 +142,7 @@ class SelectionConfig:
     graph for the rest of a run. A real obstacle is bumped into again and marked again."""
     forward_step_m: float = 0.25
     """The robot's forward step (match RobotConfig.forward_step_m): where the bump disc is centred."""
+
     def __post_init__(self) -> None:
         check_config(self.variant in SELECTION_VARIANTS, "selection.variant", self.variant,
                      f"one of {SELECTION_VARIANTS}")
