@@ -31,7 +31,7 @@ def print_summary(cfg: DagsConfig, res: Any, metrics: Any | None, summary_path: 
     stop = f" (stopped by Ctrl-C after {res.steps} of {res.requested})" if res.interrupted else ""
     print(f"{cfg.sim.scene}: {res.steps} steps{stop} in {res.seconds:.1f} s ({res.seconds_per_step:.3f} s/step), "
           f"{int(m.get('n_gaussians', 0))} Gaussians, {m.get('known_area_m2', 0.0):.1f} m^2 of floor known, "
-          f"{res.collisions} blocked moves")
+          f"{res.collisions} blocked move{'' if res.collisions == 1 else 's'}")
     if metrics is not None:
         print(f"map: Acc {metrics.acc_cm:.2f} cm, Comp {metrics.comp_cm:.2f} cm, C.R. {metrics.cr_pct:.1f} % "
               f"(<{metrics.cr_threshold_cm:g} cm), PSNR {metrics.psnr_db:.2f} dB on {metrics.n_views} held-out views")
