@@ -400,12 +400,12 @@ def _bridge_pieces(G: nx.Graph, clear: np.ndarray, cell_m: float, cfg: VoronoiCo
         label[c] = k
     size = np.array([len(c) for c in pieces])
     cell = np.array([G.nodes[i]["cell"] for i in range(n)], np.int64)
-    costs = np.where(clear >= cfg.bridge_clearance_m, 1.0, -1.0)       # negative: impassable
+    fits = np.where(clear >= cfg.bridge_clearance_m, 1.0, -1.0)        # a negative cost is impassable
+    mcp = MCP_Geometric(fits, fully_connected=True)                    # one search per tiny piece below
     for k, comp in enumerate(pieces):
         larger = np.nonzero(size[label] > size[k])[0]
         if size[k] >= cfg.bridge_min_nodes or len(larger) == 0:
             continue
-        mcp = MCP_Geometric(costs, fully_connected=True)
         cum, _ = mcp.find_costs([tuple(cell[a]) for a in comp])
         dist = cum[cell[larger, 0], cell[larger, 1]] * cell_m
         ok = np.isfinite(dist) & (dist <= cfg.bridge_length_m)

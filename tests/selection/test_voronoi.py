@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import networkx as nx
@@ -15,8 +16,7 @@ from dynactivegs.selection.voronoi import (
 )
 
 CELL = 0.05
-CFG_KW = dict(robot_radius_m=0.18, node_spacing_m=0.75, min_spur_m=0.5, frontier_dist_m=0.8)
-CFG = VoronoiConfig(**CFG_KW)
+CFG = VoronoiConfig(robot_radius_m=0.18, node_spacing_m=0.75, min_spur_m=0.5, frontier_dist_m=0.8)
 ORIGIN = np.array([-1.0, 2.0])
 
 
@@ -191,7 +191,7 @@ def room_and_pocket(gap_m: float) -> np.ndarray:
 
 def test_a_tiny_piece_is_bridged_to_a_larger_one_where_the_robot_fits_the_gap():
     free = room_and_pocket(0.40)
-    assert nx.number_connected_components(build(free, cfg=VoronoiConfig(**{**CFG_KW, "bridge_min_nodes": 1}))) == 2
+    assert nx.number_connected_components(build(free, cfg=dataclasses.replace(CFG, bridge_min_nodes=1))) == 2
     G = build(free)
     assert nx.is_connected(G)
     bridges = [(u, v, d) for u, v, d in G.edges(data=True) if d.get("bridge")]
