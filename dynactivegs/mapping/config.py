@@ -19,7 +19,7 @@ class MappingConfig:
     """Adam iterations per step."""
     color_weight: float = 1.0
     """l1: weight of L_color."""
-    depth_weight: float = 1.0
+    depth_weight: float = 2.5
     """l2: weight of L_depth (metres)."""
     iso_weight: float = 10.0
     """l3: weight of the isotropy regulariser L_iso (metres)."""
@@ -31,14 +31,19 @@ class MappingConfig:
     """The frame's reference beta b_ref is this percentile of its beta; weights are (b_ref / max(beta, b_ref))^2."""
     seed_beta_ratio: float = 1.5
     """With weighting on, pixels with beta above this times b_ref never seed new Gaussians."""
+    drop_beta_ratio: float = 0.0
+    """With weighting on, pixels with beta above this times b_ref get weight 0 instead of (b_ref / beta)^2;
+    0 (the default): never, the paper's weights as they are. See the mapping stage's docstring."""
     densify_stride: int = 2
     """New Gaussians are seeded from every densify_stride-th pixel (both directions)."""
-    densify_alpha: float = 0.5
+    densify_alpha: float = 0.7
     """Pixels where the render's accumulated opacity is below this get new Gaussians."""
     densify_depth_rel: float = 0.1
     """... and pixels observed in front of the map's surface by more than this fraction of their depth."""
     init_opacity: float = 0.6
     """Peak opacity of a new Gaussian."""
+    init_scale: float = 0.5
+    """A new Gaussian's standard deviation is this times the footprint of densify_stride pixels at its depth."""
     max_gaussians: int = 60_000
     """Cap on the map's size; densification stops there."""
     keyframe_every: int = 3
@@ -57,6 +62,11 @@ class MappingConfig:
     """Free-space carving: a Gaussian must lie this far (m) in front of the observed depth ..."""
     carve_margin_rel: float = 0.05
     """... plus this fraction of the depth, plus twice its largest scale, to be removed."""
+    vote_every: int = 10
+    """Every this-many steps, every Gaussian is tested against all keyframes (the free-space vote); 0: never."""
+    vote_min_free: int = 2
+    """The vote removes a Gaussian that at least this many keyframes see through, and more of them than show
+    a return at its depth."""
     surface_voxel_m: float = 0.15
     """Edge of the voxels of MappingOut.surface_ijk."""
     surface_opacity: float = 0.5
@@ -82,10 +92,13 @@ class MappingConfig:
         c(0 <= self.ssim_weight <= 1, "mapping.ssim_weight", self.ssim_weight, "in [0, 1]")
         c(0 <= self.ref_percentile <= 100, "mapping.ref_percentile", self.ref_percentile, "in [0, 100]")
         c(self.seed_beta_ratio >= 1, "mapping.seed_beta_ratio", self.seed_beta_ratio, ">= 1")
+        c(self.drop_beta_ratio == 0 or self.drop_beta_ratio >= 1, "mapping.drop_beta_ratio", self.drop_beta_ratio,
+          "0 (off) or >= 1")
         c(1 <= self.densify_stride <= 16, "mapping.densify_stride", self.densify_stride, "in [1, 16]")
         c(0 < self.densify_alpha <= 1, "mapping.densify_alpha", self.densify_alpha, "in (0, 1]")
         c(self.densify_depth_rel > 0, "mapping.densify_depth_rel", self.densify_depth_rel, "> 0")
         c(0 < self.init_opacity < 1, "mapping.init_opacity", self.init_opacity, "in (0, 1)")
+        c(0.05 <= self.init_scale <= 4, "mapping.init_scale", self.init_scale, "in [0.05, 4]")
         c(self.max_gaussians >= 1, "mapping.max_gaussians", self.max_gaussians, ">= 1")
         c(self.keyframe_every >= 1, "mapping.keyframe_every", self.keyframe_every, ">= 1")
         c(self.window >= 1, "mapping.window", self.window, ">= 1")
@@ -95,6 +108,8 @@ class MappingConfig:
         c(self.prune_scale_m > 0, "mapping.prune_scale_m", self.prune_scale_m, "> 0")
         c(self.carve_margin_m >= 0, "mapping.carve_margin_m", self.carve_margin_m, ">= 0")
         c(self.carve_margin_rel >= 0, "mapping.carve_margin_rel", self.carve_margin_rel, ">= 0")
+        c(self.vote_every >= 0, "mapping.vote_every", self.vote_every, ">= 0 (0 turns the vote off)")
+        c(self.vote_min_free >= 1, "mapping.vote_min_free", self.vote_min_free, ">= 1")
         c(0.02 <= self.surface_voxel_m <= 2, "mapping.surface_voxel_m", self.surface_voxel_m, "in [0.02, 2] m")
         c(0 < self.surface_opacity < 1, "mapping.surface_opacity", self.surface_opacity, "in (0, 1)")
         for name in ("lr_means", "lr_log_scales", "lr_quats", "lr_opacity", "lr_sh0"):

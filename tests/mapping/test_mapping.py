@@ -63,6 +63,73 @@ def test_carving_removes_gaussians_in_observed_free_space():
     assert n_w == 0
 
 
+def _keyframe(f: Frame, beta: np.ndarray | None = None) -> mapping.Keyframe:
+    return mapping.Keyframe(f.step, f.rgb, f.depth_m, beta, f.K, f.T_world_cam)
+
+
+def _with_depth(f: Frame, depth_m: np.ndarray) -> Frame:
+    return Frame(f.step, f.stamp_ns, f.rgb, depth_m.astype(np.float32), f.K, f.T_world_cam)
+
+
+def test_free_space_vote_removes_what_more_keyframes_see_through_than_support():
+    wall = flat_frame(depth=3.0)
+    depth = np.full(wall.depth_m.shape, 3.0)
+    depth[10:14, 14:18] = 1.0                                # something 1 m ahead, in the middle, in one frame
+    person = _with_depth(wall, depth)
+    means = torch.tensor([[1.0, 0, 0], [2.97, 0, 0], [3.5, 0, 0]])  # on the "person", on the wall, behind the wall
+    g = Gaussians(means, torch.full((3, 3), -4.0), torch.tensor([[1.0, 0, 0, 0]] * 3), torch.zeros(3), torch.zeros(3, 3))
+    cfg = mapping.MappingConfig(weighted=False)
+    # the one frame that showed it supports it; two that see the wall through it outvote it
+    g2, adam, n = mapping.free_space_vote(cfg, g, AdamState.zeros_like(g), (_keyframe(person), _keyframe(wall),
+                                                                            _keyframe(wall)))
+    assert n == 1 and len(g2) == 2 and len(adam.m[0]) == 2
+    assert not any(torch.allclose(m, means[0]) for m in g2.means)
+    # one free vote is not enough (vote_min_free 2), nor a tie of free and support votes
+    _, _, n1 = mapping.free_space_vote(cfg, g, AdamState.zeros_like(g), (_keyframe(person), _keyframe(wall)))
+    assert n1 == 0
+    _, _, n2 = mapping.free_space_vote(cfg, g, AdamState.zeros_like(g), (_keyframe(person), _keyframe(person),
+                                                                         _keyframe(wall), _keyframe(wall)))
+    assert n2 == 0
+
+
+def test_free_space_vote_keeps_the_near_side_of_a_depth_edge():
+    # the centre projects onto a far pixel right next to the near surface it belongs to
+    depth = np.full((24, 32), 3.0)
+    depth[:, :16] = 1.0
+    f = _with_depth(flat_frame(), depth)
+    K, T = f.K, f.T_world_cam
+    x_cam = np.array([(16 + 0.5 - K[0, 2]) / K[0, 0], (12 + 0.5 - K[1, 2]) / K[1, 1], 1.0]) * 1.0   # pixel (12, 16)
+    centre = torch.tensor((T[:3, :3] @ x_cam + T[:3, 3])[None], dtype=torch.float32)
+    g = Gaussians(centre, torch.full((1, 3), -4.0), torch.tensor([[1.0, 0, 0, 0]]), torch.zeros(1), torch.zeros(1, 3))
+    _, _, n = mapping.free_space_vote(mapping.MappingConfig(weighted=False), g, AdamState.zeros_like(g),
+                                      (_keyframe(f),) * 3)
+    assert n == 0
+
+
+def test_drop_beta_ratio_zeroes_the_weight_of_uncertain_pixels_only():
+    f = flat_frame()
+    beta = np.full(f.depth_m.shape, 0.1, np.float32)
+    beta[:, :8] = 0.2                                         # twice b_ref: (1/2)^2 = 0.25 with the paper's weights
+    soft = mapping.pixel_weights(mapping.MappingConfig(drop_beta_ratio=0.0), beta, f.depth_m).numpy()
+    hard = mapping.pixel_weights(mapping.MappingConfig(drop_beta_ratio=1.5), beta, f.depth_m).numpy()
+    assert np.allclose(soft[:, :8], 0.25) and np.allclose(soft[:, 8:], 1.0)
+    assert np.all(hard[:, :8] == 0.0) and np.allclose(hard[:, 8:], 1.0)
+    off = mapping.pixel_weights(mapping.MappingConfig(weighted=False, drop_beta_ratio=1.5), beta, f.depth_m).numpy()
+    assert np.all(off == 1.0)
+
+
+def test_init_scale_sets_the_size_of_new_gaussians():
+    f = flat_frame(depth=2.0)
+    rec = StepRecord(frame=f, perception=None)
+    sizes = []
+    for scale in (1.0, 0.5):
+        cfg = mapping.MappingConfig(weighted=False, init_scale=scale, iters=0)
+        ms, _ = mapping.step(cfg, rec, mapping.init_state(cfg), derive_rng(0, 0, 1))
+        sizes.append(float(ms.gaussians.scales.median()))
+    assert sizes[0] == pytest.approx(2 * 2.0 / 16.0, rel=1e-5)    # stride 2 pixels at 2 m, fx 16
+    assert sizes[1] == pytest.approx(sizes[0] / 2, rel=1e-5)
+
+
 def test_prune_drops_transparent_and_oversized():
     g = Gaussians(torch.zeros(3, 3), torch.log(torch.tensor([[0.05] * 3, [0.05] * 3, [1.0, 0.05, 0.05]])),
                   torch.tensor([[1.0, 0, 0, 0]] * 3), torch.tensor([0.0, -5.0, 0.0]), torch.zeros(3, 3))
@@ -156,3 +223,9 @@ def test_bad_config_values_are_one_line_errors():
     assert "\n" not in str(e.value)
     with pytest.raises(ConfigError, match="mapping.device"):
         mapping.MappingConfig(device="tpu")
+    with pytest.raises(ConfigError, match="mapping.drop_beta_ratio"):
+        mapping.MappingConfig(drop_beta_ratio=0.5)
+    with pytest.raises(ConfigError, match="mapping.init_scale"):
+        mapping.MappingConfig(init_scale=0.0)
+    with pytest.raises(ConfigError, match="mapping.vote_every"):
+        mapping.MappingConfig(vote_every=-1)

@@ -1,7 +1,8 @@
 """Perception + mapping on a scripted path through an apartment with people walking through the view.
 
-One module-scoped run per setting (weighting on / off), 70 steps at the default 160x92; the
-numbers are in the assertion messages.
+One module-scoped run per setting, 70 steps at the default 160x92: weighting on / off with the
+free-space vote off (the weighting alone), and weighting off with the vote on. The numbers are
+in the assertion messages.
 """
 
 from __future__ import annotations
@@ -18,8 +19,10 @@ STEPS, WARMUP = 70, 30
 
 @pytest.fixture(scope="module")
 def tours():
-    return {w: run_tour(SimConfig(scene="apartment-00"), PerceptionConfig(), MappingConfig(weighted=w), STEPS,
-                        seed=0, warmup=WARMUP) for w in (True, False)}
+    settings = {True: MappingConfig(weighted=True, vote_every=0), False: MappingConfig(weighted=False, vote_every=0),
+                "off+vote": MappingConfig(weighted=False)}
+    return {k: run_tour(SimConfig(scene="apartment-00"), PerceptionConfig(), mc, STEPS, seed=0, warmup=WARMUP)
+            for k, mc in settings.items()}
 
 
 def test_beta_separates_people_from_static_pixels_on_the_online_map(tours):
@@ -37,3 +40,8 @@ def test_weighting_gives_higher_psnr_at_held_out_poses(tours):
     on, off = tours[True].psnr_db, tours[False].psnr_db
     assert on > off, f"held-out PSNR with weighting {on:.2f} dB <= without {off:.2f} dB"
     assert on > 18.0, f"held-out PSNR with weighting {on:.2f} dB: the map is broken"
+
+
+def test_free_space_vote_removes_ghosts_the_unweighted_map_keeps(tours):
+    off, voted = tours[False].ghosts, tours["off+vote"].ghosts
+    assert voted <= off / 1.5, f"ghosts without weighting: {voted} with the vote vs {off} without: not fewer by 1.5x"
