@@ -216,7 +216,7 @@ def test_the_robot_does_not_push_into_a_person_standing_in_a_doorway():
 
 def test_bad_config_values_raise_config_error():
     for kw in ({"variant": "greedy"}, {"l_r": -1.0}, {"rebuild_every": 0}, {"local_threshold": math.inf},
-               {"reach_yaw_deg": 0.0}):
+               {"reach_yaw_deg": 0.0}, {"bump_give_up": -1}):
         with pytest.raises(ConfigError):
             selection.SelectionConfig(**kw)
     with pytest.raises(ConfigError):
@@ -421,3 +421,24 @@ def test_space_beyond_the_fields_grid_counts_as_unobserved():
                                                 np.zeros(3), VOX, node)[0])[0]
     assert g_out[0] > 2 * g_in[0]                # facing +x, out of the grid: far more to see than inside it
     assert g_out[0] > g_out[4]                   # facing -x, back over the observed grid: less
+
+
+def test_a_target_is_given_up_after_bump_give_up_bumps_on_the_way():
+    free = three_rooms()
+    fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0)], [])
+    pose = (4.5, 1.5, math.pi)
+    target = selection.Target((1.5, 1.5), math.pi, "local", 0)
+
+    def bumps_until_given_up(give_up: int, steps: int = 6) -> int | None:
+        cfg = selection.SelectionConfig(variant="gain_cost", bump_give_up=give_up)
+        state = state_on(cfg, free, target, pose)
+        for k in range(1, steps + 1):                        # the robot never moves: a bump every step
+            rec = StepRecord(frame=blind_frame(*pose, step=k), perception=PerceptionOut(
+                np.full((H, W), 0.1, np.float32), 0.0, False), mapping=mo, fields=fo)
+            state, _ = selection.step(cfg, rec, state, derive_rng(0, "sel", k))
+            if any(b[:2] == target.xy_m for b in state.banned):
+                return k
+        return None
+
+    assert bumps_until_given_up(3) == 3
+    assert bumps_until_given_up(0) is None                  # only the stuck rule (40 steps)
