@@ -27,8 +27,9 @@ Per step:
 Stuck detection. Selection runs before planning in a step and reads nothing of planning,
 so it detects the lack of progress itself: the robot has not left a disc of
 ``stuck_move_tol_m`` for ``stuck_steps`` steps while it had an unreached target (e.g. a
-person stands in a doorway). The planner's ``PlanningOut.stuck`` applies the same rule to
-report it; with equal parameters the two agree. A target given up as stuck or timed out (and,
+person stands in a doorway), or it bumped ``bump_give_up`` times on the way to it. The
+planner's ``PlanningOut.stuck`` applies the first rule to report it; with equal parameters the
+two agree on it. A target given up as stuck or timed out (and,
 for ``frontier`` and ``random``, one reached) is banned for ``ban_steps``; for the scored
 variants a reached view bans the views overlapping it (``reached_ban_deg``). One given up as
 unreachable is not banned: it cannot be chosen while it stays unreachable, and a door that
@@ -142,10 +143,11 @@ class SelectionConfig:
     graph for the rest of a run. A real obstacle is bumped into again and marked again."""
     forward_step_m: float = 0.25
     """The robot's forward step (match RobotConfig.forward_step_m): where the bump disc is centred."""
-    bump_give_up: int = 0
+    bump_give_up: int = 4
     """A target is given up, like a stuck one, after this many bumps on the way to it; 0: only the stuck rule.
     Measured: a robot on a 4-node graph whose only edge ran into something its camera could not see bumped
-    38 times in a row before stuck_steps gave the target up."""
+    38 times in a row before stuck_steps gave the target up. With 4, full's mean C.R. over apartment-00..03 x
+    seeds 0, 1 at 600 steps went from 62.8 to 67.5 % (4 of the 8 runs changed, each to a higher C.R.)."""
 
     def __post_init__(self) -> None:
         check_config(self.variant in SELECTION_VARIANTS, "selection.variant", self.variant,
