@@ -63,8 +63,8 @@ def test_carving_removes_gaussians_in_observed_free_space():
     assert n_w == 0
 
 
-def _keyframe(f: Frame, beta: np.ndarray | None = None) -> mapping.Keyframe:
-    return mapping.Keyframe(f.step, f.rgb, f.depth_m, beta, f.K, f.T_world_cam)
+def _keyframe(f: Frame) -> mapping.Keyframe:
+    return mapping.Keyframe(f.step, f.rgb, f.depth_m, None, f.K, f.T_world_cam)
 
 
 def _with_depth(f: Frame, depth_m: np.ndarray) -> Frame:
@@ -98,7 +98,7 @@ def test_free_space_vote_keeps_the_near_side_of_a_depth_edge():
     depth[:, :16] = 1.0
     f = _with_depth(flat_frame(), depth)
     K, T = f.K, f.T_world_cam
-    x_cam = np.array([(16 + 0.5 - K[0, 2]) / K[0, 0], (12 + 0.5 - K[1, 2]) / K[1, 1], 1.0]) * 1.0   # pixel (12, 16)
+    x_cam = np.array([(16 + 0.5 - K[0, 2]) / K[0, 0], (12 + 0.5 - K[1, 2]) / K[1, 1], 1.0])   # pixel (12, 16), 1 m
     centre = torch.tensor((T[:3, :3] @ x_cam + T[:3, 3])[None], dtype=torch.float32)
     g = Gaussians(centre, torch.full((1, 3), -4.0), torch.tensor([[1.0, 0, 0, 0]]), torch.zeros(1), torch.zeros(1, 3))
     _, _, n = mapping.free_space_vote(mapping.MappingConfig(weighted=False), g, AdamState.zeros_like(g),
