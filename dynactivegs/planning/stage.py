@@ -64,8 +64,12 @@ class PlanningConfig:
     """Spacing of the samples of U_m along an edge."""
     replan_every: int = 5
     """With nothing else changed, the path is re-planned every this many steps (U_m moves on)."""
-    block_penalty_m: float = 20.0
-    """Extra cost of an edge near a place where the robot was recently blocked."""
+    block_penalty_m: float = 3.0
+    """Extra cost of an edge near a place where the robot was recently blocked. Nearly every block is a person:
+    in 4 full runs of 600 steps, 210 of the 213 blocks by something seen had most of the swept rectangle's
+    returns on a person. At 20 m the robot turned toward detours of many metres around someone who moved on
+    a few steps later, and back when the block expired; at 3 m it detours only around the corner and
+    otherwise waits for the way to clear."""
     block_radius_m: float = 0.4
     """Edges passing within this distance of a blocked spot get the penalty."""
     block_hold_steps: int = 15

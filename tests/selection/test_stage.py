@@ -216,7 +216,7 @@ def test_the_robot_does_not_push_into_a_person_standing_in_a_doorway():
 
 def test_bad_config_values_raise_config_error():
     for kw in ({"variant": "greedy"}, {"l_r": -1.0}, {"rebuild_every": 0}, {"local_threshold": math.inf},
-               {"reach_yaw_deg": 0.0}, {"bump_give_up": -1}):
+               {"reach_yaw_deg": 0.0}, {"bump_give_up": -1}, {"bump_near_m": -0.5}):
         with pytest.raises(ConfigError):
             selection.SelectionConfig(**kw)
     with pytest.raises(ConfigError):
@@ -364,15 +364,22 @@ def test_standing_still_before_something_moving_is_a_wait_not_a_bump():
     depth, which = render_depth(view(*pose), K, W, H, (9.0, 3.0), [(4.05, 1.3, 4.2, 1.7, 1.8)])
     frame = Frame(1, 1, np.zeros((H, W, 3), np.uint8), depth, K.copy(), view(*pose))
 
-    def marked(beta_box: float, frame: Frame) -> bool:
+    def marked(beta_box: float, frame: Frame, c: selection.SelectionConfig = cfg) -> bool:
         beta = np.where(which == 0, beta_box, 0.1).astype(np.float32)
         rec = StepRecord(frame=frame, perception=PerceptionOut(beta, 0.0, False), mapping=mo, fields=fo)
-        bumps = selection.step(cfg, rec, state, derive_rng(0, "sel"))[0].bumps
+        bumps = selection.step(c, rec, state, derive_rng(0, "sel"))[0].bumps
         return len(bumps) == 1 and math.hypot(bumps[0][0] - ahead[0], bumps[0][1] - ahead[1]) < cfg.bump_radius_m
 
     assert not marked(2.0, frame)                           # it moves (high beta): the robot waited for it
     assert marked(0.1, frame)                               # static: an obstacle the grid had missed
     assert marked(2.0, blind_frame(*pose, step=1))          # nothing seen: it pushed into what the camera cannot see
+    # a person beside the swept rectangle (who stepped into the way during the move), 0.3-0.6 m from the camera
+    depth, which = render_depth(view(*pose), K, W, H, (9.0, 3.0), [(4.0, 1.75, 4.3, 2.05, 1.8)])
+    beside = Frame(1, 1, np.zeros((H, W, 3), np.uint8), depth, K.copy(), view(*pose))
+    assert (which == 0).sum() >= 10
+    assert not marked(2.0, beside)                          # mostly moving, near: a wait
+    assert marked(0.1, beside)                              # static: an obstacle
+    assert marked(2.0, beside, dataclasses.replace(cfg, bump_near_m=0.0))   # rectangle only: it is outside
     # a bump disc is kept for bump_hold_steps, then dropped (a person who stepped in the way reads as one too)
     bumped = selection.step(cfg, StepRecord(frame=blind_frame(*pose, step=1), perception=PerceptionOut(
         np.full((H, W), 0.1, np.float32), 0.0, False), mapping=mo, fields=fo), state, derive_rng(0, "sel"))[0]
