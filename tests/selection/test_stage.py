@@ -373,7 +373,8 @@ def test_standing_still_before_something_moving_is_a_wait_not_a_bump():
     assert not marked(2.0, frame)                           # it moves (high beta): the robot waited for it
     assert marked(0.1, frame)                               # static: an obstacle the grid had missed
     assert marked(2.0, blind_frame(*pose, step=1))          # nothing seen: it pushed into what the camera cannot see
-    # a person beside the swept rectangle (who stepped into the way during the move), 0.3-0.6 m from the camera
+    # a person beside the swept rectangle (who stepped into the way during the move), 0.3-0.6 m from the camera;
+    # marked() reads the new `which`
     depth, which = render_depth(view(*pose), K, W, H, (9.0, 3.0), [(4.0, 1.75, 4.3, 2.05, 1.8)])
     beside = Frame(1, 1, np.zeros((H, W, 3), np.uint8), depth, K.copy(), view(*pose))
     assert (which == 0).sum() >= 10
