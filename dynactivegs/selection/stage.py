@@ -156,9 +156,11 @@ class SelectionConfig:
     """The robot's forward step (match RobotConfig.forward_step_m): where the bump disc is centred."""
     bump_give_up: int = 4
     """A target is given up, like a stuck one, after this many bumps on the way to it; 0: only the stuck rule.
+    Only the discs still kept count, so the bumps must fall within the last bump_hold_steps steps.
     Measured: a robot on a 4-node graph whose only edge ran into something its camera could not see bumped
-    38 times in a row before stuck_steps gave the target up. With 4, full's mean C.R. over apartment-00..03 x
-    seeds 0, 1 at 600 steps went from 62.8 to 67.5 % (4 of the 8 runs changed, each to a higher C.R.)."""
+    38 times in a row before stuck_steps gave the target up. With 4 (and discs kept 100 steps), full's mean
+    C.R. over apartment-00..03 x seeds 0, 1 at 600 steps went from 62.8 to 67.5 % (4 of the 8 runs changed,
+    each to a higher C.R.)."""
 
     def __post_init__(self) -> None:
         check_config(self.variant in SELECTION_VARIANTS, "selection.variant", self.variant,
@@ -343,7 +345,7 @@ def _at_target(cfg: SelectionConfig, target: Target, robot_xy: np.ndarray, yaw_r
             and abs(wrap_angle(target.yaw_rad - yaw_rad)) <= math.radians(cfg.reach_yaw_deg))
 
 
-def _moving_ahead(cfg: SelectionConfig, frame: Frame, beta: np.ndarray) -> bool:
+def _moving_near(cfg: SelectionConfig, frame: Frame, beta: np.ndarray) -> bool:
     """Whether the rectangle of the robot's next forward step, or (``bump_near_m`` > 0) everything the
     camera sees nearer than ``bump_near_m``, holds something moving: enough returns, most of them with
     beta above ``occupancy.beta_max`` (the pixels that never become obstacles). A majority, not a count:
@@ -534,7 +536,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
     # grid: a surface new to the map has a high beta, and such returns never become obstacles.)
     bumped = (state.target is not None and lp is not None and lp == (float(pose.x_m), float(pose.y_m), float(pose.yaw_rad))
               and not _at_target(cfg, state.target, robot_xy, pose.yaw_rad)
-              and not _moving_ahead(cfg, f, rec.perception.beta))
+              and not _moving_near(cfg, f, rec.perception.beta))
     bumps = tuple(b for b in state.bumps if b[2] > now)
     if bumped and cfg.bump_radius_m > 0:
         centre = robot_xy + cfg.forward_step_m * np.array([math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)])
