@@ -18,6 +18,8 @@ Layout of ``--out``::
     progress.png, coverage.png            PSNR and C.R. over steps; coverage over steps, per method
 
 A run whose metrics file exists is skipped, so an interrupted sweep resumes where it stopped.
+``--reevaluate`` measures finished runs again from the map snapshots in their MCAP logs (the
+runs log the map at every checkpoint) with the current evaluation settings.
 Runs go to a local process pool (``--workers``) or to Ray tasks (``--ray ADDRESS``).
 """
 
@@ -200,7 +202,7 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
 
         writer = LogWriter(spec.mcap_path, run_metadata(cfg, cfg.seed, steps_requested=str(spec.steps),
                                                         preset=spec.preset))
-        sinks.append(McapSink(writer, last_step=spec.steps - 1))
+        sinks.append(McapSink(writer, last_step=spec.steps - 1, also_at=tuple(c - 1 for c in checkpoints)))
     t1 = time.perf_counter()
     try:
         res = pipeline.run(cfg, spec.steps, sink=_Fanout(sinks))
@@ -231,6 +233,115 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
     tmp.write_text(json.dumps(result, indent=1))
     os.replace(tmp, spec.metrics_path)
     return result
+
+
+def _logged_maps(mcap_path: Path, steps: list[int]) -> tuple[dict[int, tuple[int, Any]], Any]:
+    """From a run's log: for each wanted step index, (the logged step used, its map snapshot), and the
+    trajectory (T, 2) from ``/truth``. The snapshot at the step itself is used when logged, else the
+    nearest later one (logs written before checkpoint snapshots were added have them every 50 steps)."""
+    import numpy as np
+
+    from replay.source import LogReader
+    from recorder.mcap_log import MAP_TOPIC
+
+    reader = LogReader(mcap_path)
+    logged: dict[int, Any] = {}
+    traj = []
+    for st in reader.steps():
+        traj.append((st["/truth"].robot.x_m, st["/truth"].robot.y_m))
+        if MAP_TOPIC in st:
+            logged[st.step] = st
+    maps: dict[int, tuple[int, Any]] = {}
+    for want in steps:
+        later = [k for k in logged if k >= want]
+        if not later:
+            raise DagsError(f"{mcap_path}: no map snapshot at or after step {want} (the log ends at step "
+                            f"{reader.end.last_step if reader.end else '?'}); re-run it instead")
+        k = min(later)
+        maps[want] = (k, logged[k][MAP_TOPIC])
+    return maps, np.asarray(traj, np.float64).reshape(-1, 2)
+
+
+def reevaluate_one(metrics_path: Path, eval_overrides: tuple[str, ...] = ()) -> dict[str, Any]:
+    """Measure a finished run again from its MCAP log with the current evaluation (``eval_overrides``:
+    EvalConfig key=value); the exploration is not re-run. Rewrites the metrics file (atomically) with
+    the new checkpoint rows; each row's ``map_step`` says which logged map it measured."""
+    from dynactivegs.config import config_from_json
+    from dynactivegs.eval.config import EvalConfig
+    from dynactivegs.eval.metrics import SceneEvaluator
+
+    done = json.loads(metrics_path.read_text())
+    if not done.get("mcap"):
+        raise DagsError(f"{metrics_path}: the run kept no MCAP log (--no-mcap), so it cannot be re-evaluated; "
+                        "re-run it")
+    mcap_path = metrics_path.with_name(done["mcap"])
+    if not mcap_path.is_file():
+        raise DagsError(f"{mcap_path}: missing; the run's log is needed to re-evaluate it (or re-run it)")
+    cfg = config_from_json(json.dumps(done["config"]))
+    ecfg = with_overrides(EvalConfig(), list(eval_overrides))
+    t0 = time.perf_counter()
+    evaluator = SceneEvaluator(cfg.sim, ecfg)
+    old_rows = done["checkpoints"]
+    maps, traj = _logged_maps(mcap_path, [r["step"] - 1 for r in old_rows])
+    rows = []
+    for r in old_rows:
+        used, g = maps[r["step"] - 1]
+        m = evaluator.evaluate(g, step=r["step"], trajectory_xy_m=traj)
+        rows.append({"fraction": r["fraction"], "n_gaussians": len(g), "map_step": used + 1,
+                     **dataclasses.asdict(m)})
+    done.update(checkpoints=rows, eval_overrides=list(eval_overrides), eval_config=json.loads(to_json(ecfg)),
+                seconds_eval=time.perf_counter() - t0, reevaluated=time.strftime("%Y-%m-%d"))
+    tmp = metrics_path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(done, indent=1))
+    os.replace(tmp, metrics_path)
+    return done
+
+
+def _reeval_worker(path: str, eval_overrides: tuple[str, ...]) -> dict[str, Any]:
+    import torch
+
+    torch.set_num_threads(1)
+    return reevaluate_one(Path(path), eval_overrides)
+
+
+def reevaluate(specs: list[RunSpec], *, workers: int = 1, progress: bool = True) -> list[dict[str, Any]]:
+    """:func:`reevaluate_one` for every finished run of ``specs`` (unfinished ones are left alone)."""
+    from tqdm import tqdm
+
+    paths = [str(s.metrics_path) for s in specs if s.metrics_path.is_file()]
+    if not paths:
+        return []
+    ov = specs[0].eval_overrides
+    if workers > 1:
+        from dynactivegs.eval.geometry import ground_truth_points, survey
+
+        seen = set()
+        for s in specs:                      # the scene's ground truth and survey once, before the workers
+            if s.scene not in seen and s.metrics_path.is_file():
+                seen.add(s.scene)
+                from dynactivegs.config import config_from_json
+
+                sim = config_from_json(json.dumps(json.loads(s.metrics_path.read_text())["config"])).sim
+                ecfg = s.eval_config()
+                survey(sim, ecfg, ground_truth_points(sim, ecfg))
+    bar = tqdm(total=len(paths), desc="re-evaluate", unit="run", disable=not progress, dynamic_ncols=True)
+    out = []
+    try:
+        if workers <= 1:
+            stream: Iterator[dict[str, Any]] = (reevaluate_one(Path(p), ov) for p in paths)
+        else:
+            import multiprocessing as mp
+            from concurrent.futures import ProcessPoolExecutor, as_completed
+
+            pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
+                                       initializer=_die_with_parent)
+            stream = (f.result() for f in as_completed([pool.submit(_reeval_worker, p, ov) for p in paths]))
+        for r in stream:
+            out.append(r)
+            bar.update(1)
+    finally:
+        bar.close()
+    return out
 
 
 def _worker(spec: RunSpec, torch_threads: int | None) -> dict[str, Any]:
@@ -354,6 +465,9 @@ def parser() -> argparse.ArgumentParser:
                    "evaluation (e.g. eval.n_views=20)")
     p.add_argument("--no-mcap", dest="mcap", action="store_false", help="do not save the runs' MCAP logs")
     p.add_argument("--no-progress", dest="progress", action="store_false", help="no progress bar")
+    p.add_argument("--reevaluate", action="store_true", help="measure the finished runs again from their MCAP logs "
+                   "with the current evaluation settings (and --set eval.KEY=VALUE), without re-running them; "
+                   "unfinished runs are not started")
     return p
 
 
@@ -383,11 +497,16 @@ def run(args: argparse.Namespace) -> int:
     specs = plan_runs(presets, scenes, seeds, args.steps, overrides, args.out, mcap=args.mcap, device=args.device)
     args.out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    skipped, results = sweep(specs, workers=workers, ray_address=args.ray, gpu=args.device == "cuda",
-                             progress=args.progress)
-    where = f"Ray ({args.ray})" if args.ray else f"{workers} local worker{'s' if workers > 1 else ''}"
-    print(f"dagsbench: {len(results)} run{'s' if len(results) != 1 else ''} in {time.perf_counter() - t0:.1f} s "
-          f"on {where}, {len(skipped)} already finished (skipped)")
+    if args.reevaluate:
+        results = reevaluate(specs, workers=workers, progress=args.progress)
+        print(f"dagsbench: {len(results)} finished run{'s' if len(results) != 1 else ''} re-evaluated in "
+              f"{time.perf_counter() - t0:.1f} s, {len(specs) - len(results)} not run yet (left alone)")
+    else:
+        skipped, results = sweep(specs, workers=workers, ray_address=args.ray, gpu=args.device == "cuda",
+                                 progress=args.progress)
+        where = f"Ray ({args.ray})" if args.ray else f"{workers} local worker{'s' if workers > 1 else ''}"
+        print(f"dagsbench: {len(results)} run{'s' if len(results) != 1 else ''} in {time.perf_counter() - t0:.1f} s "
+              f"on {where}, {len(skipped)} already finished (skipped)")
     from dynactivegs.eval.tables import write_reports
 
     wanted = {(s.preset, s.scene, s.seed) for s in specs}

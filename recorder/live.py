@@ -53,17 +53,20 @@ def occupancy_of(selection_state: Any) -> tuple[np.ndarray, np.ndarray, float] |
 class McapSink:
     """A :class:`dynactivegs.pipeline.StepSink` writing every step to a :class:`recorder.mcap_log.LogWriter`."""
 
-    def __init__(self, writer: Any, *, last_step: int, map_every: int = DEFAULT_MAP_EVERY) -> None:
+    def __init__(self, writer: Any, *, last_step: int, map_every: int = DEFAULT_MAP_EVERY,
+                 also_at: tuple[int, ...] = ()) -> None:
         self.writer = writer
         self.last_step = last_step
         self.map_every = map_every
+        self.also_at = frozenset(also_at)
+        """Steps whose map is logged besides every ``map_every``-th (dagsbench: its checkpoints)."""
 
     def on_step(self, rec: StepRecord, truth: SimTruth, states: list[object], metrics: dict[str, float]) -> None:
         step, t = rec.frame.step, rec.frame.stamp_ns
         self.writer.write_step_record(rec)
         self.writer.write("/truth", truth, t)
         self.writer.write_metrics(step, metrics, t)
-        if wants_map(step, self.last_step, self.map_every):
+        if wants_map(step, self.last_step, self.map_every) or step in self.also_at:
             self.writer.write_map(states[1].gaussians, t)
         self.writer.end_step(step, t)
 

@@ -215,6 +215,66 @@ def ground_truth_points(sim: SimConfig, cfg: EvalConfig) -> GroundTruthPoints:
     return GroundTruthPoints(pts32.astype(np.float64), faces, key, path, False, len(vps), frac, seconds)
 
 
+# ---------------------------------------------------------------------------------------- survey
+SURVEY_VERSION = 1
+"""Bump when the survey selection changes, so that stale cache files are not reused."""
+
+
+@dataclass(frozen=True)
+class Survey:
+    """The views the "renders" reconstruction points are extracted from (see :func:`survey`)."""
+
+    poses: np.ndarray             # float64 (S, 4, 4) T_world_cam
+    n_candidates: int             # lattice views they were chosen from
+    ceiling: float                # fraction of the ground-truth points a perfect map shows from them
+    from_cache: bool
+    seconds: float
+
+    def note(self) -> str:
+        """How the views were chosen, for a reconstruction's description."""
+        return (f"{len(self.poses)} of {self.n_candidates} lattice views, chosen to cover the ground truth; "
+                f"a perfect map reaches C.R. {100 * self.ceiling:.1f} % from them")
+
+
+def survey(sim: SimConfig, cfg: EvalConfig, gt: GroundTruthPoints, *, renderer: Renderer | None = None,
+           freespace: FreeSpace | None = None, gt_tree: cKDTree | None = None) -> Survey:
+    """The survey views of ``sim.scene`` (:func:`dynactivegs.eval.views.covering_survey` with ``cfg``'s
+    survey_spacing_m, survey_yaws, survey_cover, cr_threshold_cm, edge_jump_rel and voxel_m): loaded
+    from the cache, or computed and cached (keyed by those, the camera, the robot radius and ``gt.key``)."""
+    from dynactivegs.eval.views import covering_survey
+
+    cam = sim.camera
+    params = dict(version=SURVEY_VERSION, gt=gt.key, spacing_m=cfg.survey_spacing_m, yaws=cfg.survey_yaws,
+                  cover=cfg.survey_cover, threshold_cm=cfg.cr_threshold_cm, edge_jump_rel=cfg.edge_jump_rel,
+                  voxel_m=cfg.voxel_m, width_px=cam.width_px, height_px=cam.height_px, hfov_deg=cam.hfov_deg,
+                  vfov_deg=cam.vfov_deg, min_depth_m=cam.min_depth_m, max_depth_m=cam.max_depth_m,
+                  camera_height_m=cam.height_m, robot_radius_m=sim.robot.radius_m)
+    key = hashlib.sha256(json.dumps(params, sort_keys=True).encode()).hexdigest()[:24]
+    path = gt.path.parent.parent / "survey" / f"{gt.path.stem.rsplit('-', 1)[0]}-{key}.npz"
+    t0 = time.perf_counter()
+    if path.is_file():
+        with np.load(path) as z:
+            meta = json.loads(str(z["meta"]))
+            if meta.get("key") == key:
+                return Survey(z["poses"].astype(np.float64), int(meta["n_candidates"]), float(meta["ceiling"]), True,
+                              time.perf_counter() - t0)
+    if renderer is None or freespace is None:
+        scene = load_scene(sim)
+        renderer = scene_renderer(scene) if renderer is None else renderer
+        freespace = scene_freespace(scene, renderer, sim.grid_res_m, sim.robot.body_height_m) \
+            if freespace is None else freespace
+    poses, n_cand, ceiling = covering_survey(renderer, freespace, sim.robot.radius_m, cam, cfg.survey_spacing_m,
+                                             cfg.survey_yaws, gt.points_m, cfg.survey_cover,
+                                             cfg.cr_threshold_cm / 100.0, cfg.edge_jump_rel, cfg.voxel_m, gt_tree)
+    seconds = time.perf_counter() - t0
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
+    np.savez(tmp, poses=poses, meta=np.array(json.dumps(dict(key=key, params=params, n_candidates=n_cand,
+                                                                  ceiling=ceiling, seconds=seconds))))
+    os.replace(tmp, path)
+    return Survey(poses, n_cand, ceiling, False, seconds)
+
+
 # ---------------------------------------------------------------------------------------- metrics
 def voxel_downsample(points_m: np.ndarray, voxel_m: float) -> np.ndarray:
     """float64 (M, 3): the centroid of the points (N, 3) in each occupied voxel of size ``voxel_m``.

@@ -15,12 +15,12 @@ from scipy.spatial import cKDTree
 
 from dynactivegs.config import SimConfig
 from dynactivegs.eval.config import EvalConfig
-from dynactivegs.eval.geometry import GroundTruthPoints, geometry_metrics, ground_truth_points
+from dynactivegs.eval.geometry import GroundTruthPoints, Survey, geometry_metrics, ground_truth_points, survey
 from dynactivegs.eval.lpips import load_lpips
 from dynactivegs.eval.progress import CoverageProbe
 from dynactivegs.eval.recon import ReconPoints, centre_points, rendered_points
 from dynactivegs.eval.rendering import render_metrics
-from dynactivegs.eval.views import camera_intrinsics, ground_truth_renders, heldout_views, survey_views
+from dynactivegs.eval.views import camera_intrinsics, ground_truth_renders, heldout_views
 from dynactivegs.sim.scenes import load_scene, scene_freespace, scene_renderer
 from dynactivegs.splat.gaussians import Gaussians
 from dynactivegs.splat.render import Backend
@@ -67,16 +67,21 @@ class SceneEvaluator:
         self.gt: GroundTruthPoints = ground_truth_points(sim, cfg)
         self._gt_tree = cKDTree(self.gt.points_m)
         self.K = camera_intrinsics(sim.camera)
-        self._survey: np.ndarray | None = None
+        self._survey: Survey | None = None
         self.lpips_model, self.lpips_note = load_lpips(cfg.lpips_weights_path)
 
     @property
-    def survey_poses(self) -> np.ndarray:
-        """(V, 4, 4) views the "renders" reconstruction points are extracted from (computed once)."""
+    def survey(self) -> Survey:
+        """The views the "renders" reconstruction points are extracted from (cached on disk per scene)."""
         if self._survey is None:
-            self._survey = survey_views(self.freespace, self.sim.robot.radius_m, self.sim.camera,
-                                        self.cfg.survey_spacing_m, self.cfg.survey_yaws)
+            self._survey = survey(self.sim, self.cfg, self.gt, renderer=self.renderer, freespace=self.freespace,
+                                  gt_tree=self._gt_tree)
         return self._survey
+
+    @property
+    def survey_poses(self) -> np.ndarray:
+        """(V, 4, 4) the survey's poses."""
+        return self.survey.poses
 
     def coverage_probe(self) -> CoverageProbe:
         """A probe of ``cfg.coverage_points`` ground-truth points at the C.R. threshold."""
@@ -92,7 +97,7 @@ class SceneEvaluator:
         cam = self.sim.camera
         return rendered_points(gaussians, self.survey_poses, self.K, cam.width_px, cam.height_px,
                                alpha_min=self.cfg.alpha_min, edge_jump_rel=self.cfg.edge_jump_rel,
-                               voxel_m=self.cfg.voxel_m, backend=backend)
+                               voxel_m=self.cfg.voxel_m, backend=backend, views_note=self.survey.note())
 
     def heldout(self, trajectory_xy_m: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Held-out poses (V, 4, 4) away from the trajectory (T, 2), and their static-only rgb and depth."""

@@ -3,8 +3,10 @@
 - ``"centres"``: the centres of Gaussians whose peak opacity is above ``opacity_min``. Cheap
   (no rendering); blind to how far a Gaussian extends, so a few large Gaussians covering a
   wall give few points.
-- ``"renders"``: the map is rendered at a set of views (by default the survey views: a
-  free-space lattice x evenly spaced headings) and each pixel whose accumulated opacity is
+- ``"renders"``: the map is rendered at a set of views (by default the survey views: the
+  fewest views of a free-space lattice x evenly spaced headings from which a perfect map
+  shows nearly all the ground truth, :func:`dynactivegs.eval.geometry.survey`; a sparse
+  fixed lattice would cap C.R. below 100 % for a perfect map) and each pixel whose accumulated opacity is
   above ``alpha_min`` is back-projected at its expected depth. This measures the surface the
   map shows, as a mesh extracted from rendered depth would. Expected depth blends the two
   sides of a depth edge into "flying" pixels between them; as in depth fusion, pixels that
@@ -87,9 +89,10 @@ def depth_edge_mask(depth_m: np.ndarray, valid: np.ndarray, jump_rel: float) -> 
 
 def rendered_points(gaussians: Gaussians, poses: np.ndarray, K: np.ndarray, width: int, height: int, *,
                     alpha_min: float = 0.9, edge_jump_rel: float = 0.1, voxel_m: float = 0.01,
-                    backend: Backend = "auto") -> ReconPoints:
+                    backend: Backend = "auto", views_note: str = "") -> ReconPoints:
     """Back-projected depth of renders at ``poses`` (V, 4, 4) where the accumulated opacity exceeds ``alpha_min``,
-    leaving out depth-edge pixels (:func:`depth_edge_mask` with ``edge_jump_rel``; 0 keeps every pixel)."""
+    leaving out depth-edge pixels (:func:`depth_edge_mask` with ``edge_jump_rel``; 0 keeps every pixel).
+    ``views_note``: how the poses were chosen, for the description."""
     assert poses.ndim == 3 and poses.shape[1:] == (4, 4)
     parts = []
     if len(gaussians):
@@ -105,5 +108,6 @@ def rendered_points(gaussians: Gaussians, poses: np.ndarray, K: np.ndarray, widt
     pts = np.concatenate(parts) if parts else np.zeros((0, 3))
     down = voxel_downsample(pts, voxel_m)
     edges = f", depth edges (jump > {edge_jump_rel:g} x depth) left out" if edge_jump_rel > 0 else ""
-    return ReconPoints(down, "renders", f"back-projected depth of {len(poses)} renders where alpha > {alpha_min:g}"
-                                        f"{edges}, {voxel_m * 100:g} cm voxels")
+    views = f" ({views_note})" if views_note else ""
+    return ReconPoints(down, "renders", f"back-projected depth of {len(poses)} renders{views} where alpha > "
+                                        f"{alpha_min:g}{edges}, {voxel_m * 100:g} cm voxels")

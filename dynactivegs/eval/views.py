@@ -50,6 +50,109 @@ def survey_views(freespace: FreeSpace, radius_m: float, camera: CameraConfig, sp
     return np.stack(poses) if poses else np.zeros((0, 4, 4))
 
 
+def _true_surface(renderer: Renderer, T: np.ndarray, camera: CameraConfig, edge_jump_rel: float) -> np.ndarray:
+    """float64 (N, 3): a perfect map's "renders" points of one view: the static mesh's back-projected depth,
+    depth-edge pixels left out (as :func:`dynactivegs.eval.recon.rendered_points` does)."""
+    from dynactivegs.eval.recon import backproject_depth, depth_edge_mask      # recon imports geometry, which imports this
+
+    K = camera_intrinsics(camera)
+    depth = renderer.render(T, K, camera.width_px, camera.height_px, min_depth_m=camera.min_depth_m,
+                            max_depth_m=camera.max_depth_m).depth_m.astype(np.float64)
+    keep = depth > 0
+    if edge_jump_rel > 0:
+        keep &= ~depth_edge_mask(depth, keep, edge_jump_rel)
+    return backproject_depth(depth, keep, K, T)
+
+
+def view_footprints(renderer: Renderer, poses: np.ndarray, camera: CameraConfig, points_m: np.ndarray,
+                    radius_m: float, edge_jump_rel: float, voxel_m: float,
+                    points_tree: cKDTree | None = None) -> list[np.ndarray]:
+    """For each pose (V, 4, 4): int64 indices of the ``points_m`` (N, 3) that a perfect map shows from it:
+    those within ``radius_m`` of its :func:`_true_surface` points, voxel-downsampled at ``voxel_m``."""
+    from dynactivegs.eval.geometry import voxel_downsample
+
+    tree = cKDTree(points_m) if points_tree is None else points_tree
+    out = []
+    for T in poses:
+        pts = voxel_downsample(_true_surface(renderer, T, camera, edge_jump_rel), voxel_m)
+        hits = tree.query_ball_point(pts, radius_m, return_sorted=False) if len(pts) else []
+        out.append(np.unique(np.fromiter((i for h in hits for i in h), np.int64)))
+    return out
+
+
+def perfect_cr(renderer: Renderer, poses: np.ndarray, camera: CameraConfig, points_m: np.ndarray, radius_m: float,
+               edge_jump_rel: float, voxel_m: float) -> float:
+    """The fraction of ``points_m`` within ``radius_m`` of a perfect map's "renders" points at ``poses``
+    (voxel-downsampled together, as a map's are): the C.R. a perfect map reaches with these views."""
+    from dynactivegs.eval.geometry import voxel_downsample
+
+    if len(poses) == 0 or len(points_m) == 0:
+        return 0.0
+    pts = voxel_downsample(np.concatenate([_true_surface(renderer, T, camera, edge_jump_rel) for T in poses]), voxel_m)
+    if len(pts) == 0:
+        return 0.0
+    d, _ = cKDTree(pts).query(points_m, distance_upper_bound=radius_m)
+    return float((d <= radius_m).mean())
+
+
+def greedy_cover(footprints: list[np.ndarray], n_points: int, fraction: float) -> tuple[np.ndarray, int, int]:
+    """Greedy set cover: the indices of the footprints chosen, in order, until the chosen ones cover
+    ``fraction`` of the union of all; with (points covered, points in the union).
+
+    Each round takes the footprint adding the most uncovered points (ties: the lowest index), found
+    lazily: a footprint's gain only shrinks, so a stale gain at the top of the heap is re-counted and
+    pushed back until the top one is current. Deterministic.
+    """
+    import heapq
+
+    union = np.zeros(n_points, bool)
+    for f in footprints:
+        union[f] = True
+    total = int(union.sum())
+    need = math.ceil(fraction * total - 1e-9)
+    covered = np.zeros(n_points, bool)
+    heap = [(-len(f), i) for i, f in enumerate(footprints) if len(f)]
+    heapq.heapify(heap)
+    chosen: list[int] = []
+    n_cov = 0
+    while n_cov < need and heap:
+        neg, i = heapq.heappop(heap)
+        gain = int((~covered[footprints[i]]).sum())
+        if gain < -neg:                      # stale: re-count and queue again
+            if gain > 0:
+                heapq.heappush(heap, (-gain, i))
+            continue
+        covered[footprints[i]] = True
+        n_cov += gain
+        chosen.append(i)
+    return np.asarray(chosen, np.int64), n_cov, total
+
+
+def covering_survey(renderer: Renderer, freespace: FreeSpace, radius_m: float, camera: CameraConfig,
+                    spacing_m: float, n_yaws: int, points_m: np.ndarray, cover: float, threshold_m: float,
+                    edge_jump_rel: float, voxel_m: float,
+                    points_tree: cKDTree | None = None) -> tuple[np.ndarray, int, float]:
+    """The survey the "renders" reconstruction is rendered from: (poses (S, 4, 4), candidates, ceiling).
+
+    Candidates are :func:`survey_views` (``spacing_m`` x ``n_yaws``). With ``cover`` in (0, 1], the
+    survey is the fewest of them, chosen greedily (:func:`greedy_cover`), that a perfect map would
+    show ``cover`` of the ground-truth points ``points_m`` from, out of those it shows from all
+    candidates (a point counts within ``threshold_m``, the C.R. threshold); with ``cover`` 0 it
+    is every candidate. ``ceiling``: :func:`perfect_cr` of the survey, the highest C.R. a map can reach
+    with it (per-view footprints are voxel-downsampled apart, so the cover is met to within a few points).
+    """
+    cand = survey_views(freespace, radius_m, camera, spacing_m, n_yaws)
+    if len(cand) == 0:
+        return cand, 0, 0.0
+    if cover > 0:
+        feet = view_footprints(renderer, cand, camera, points_m, threshold_m, edge_jump_rel, voxel_m, points_tree)
+        chosen, _, _ = greedy_cover(feet, len(points_m), cover)
+        poses = cand[np.sort(chosen)]
+    else:
+        poses = cand
+    return poses, len(cand), perfect_cr(renderer, poses, camera, points_m, threshold_m, edge_jump_rel, voxel_m)
+
+
 def heldout_views(freespace: FreeSpace, radius_m: float, camera: CameraConfig, n_views: int, seed: int,
                   scene_name: str, trajectory_xy_m: np.ndarray | None = None,
                   min_trajectory_dist_m: float = 0.2) -> np.ndarray:

@@ -10,8 +10,8 @@ import pytest
 from dynactivegs.config import CameraConfig, CrowdConfig, SimConfig
 from dynactivegs.errors import DagsError
 from dynactivegs.eval.config import EvalConfig
-from dynactivegs.eval.views import (camera_intrinsics, free_space_lattice, ground_truth_renders, heldout_views,
-                                    survey_views)
+from dynactivegs.eval.views import (camera_intrinsics, covering_survey, free_space_lattice, greedy_cover,
+                                    ground_truth_renders, heldout_views, survey_views, view_footprints)
 from dynactivegs.sim.robot import camera_pose
 from dynactivegs.sim.world import Simulator
 
@@ -78,6 +78,33 @@ def test_survey_views_cover_every_lattice_point_with_every_heading(sim):
     assert len(xy) > 3 and poses.shape == (4 * len(xy), 4, 4)
     np.testing.assert_allclose(poses[::4, :2, 3], xy)
     np.testing.assert_allclose([yaw_of(T) for T in poses[:4]], [0.0, math.pi / 2, math.pi, -math.pi / 2], atol=1e-12)
+
+
+def test_greedy_cover_takes_the_largest_gain_first_and_stops_at_the_fraction():
+    feet = [np.array([0, 1, 2, 3]), np.array([0, 1]), np.array([6]), np.array([2, 3, 4, 5]), np.array([], np.int64)]
+    chosen, n_cov, total = greedy_cover(feet, 8, 1.0)
+    assert chosen.tolist() == [0, 3, 2] and n_cov == total == 7       # point 7 is in no footprint
+    chosen, n_cov, _ = greedy_cover(feet, 8, 0.5)                     # 4 of 7 points: one view does
+    assert chosen.tolist() == [0] and n_cov == 4
+    # Ties go to the lower index, also after a stale gain was re-counted.
+    chosen, _, _ = greedy_cover([np.array([0, 1, 2]), np.array([2, 3]), np.array([4, 5])], 6, 1.0)
+    assert chosen.tolist() == [0, 2, 1]
+
+
+def test_covering_survey_shows_what_every_candidate_shows_with_fewer_views(sim):
+    gt = sim.surface_samples(4000, np.random.default_rng(3))
+    all_poses, n_cand, all_ceiling = covering_survey(sim.renderer, sim.freespace, SIM.robot.radius_m, CAM, 0.5, 8,
+                                                     gt, 0.0, 0.05, 0.1, 0.01)
+    poses, n_cand2, ceiling = covering_survey(sim.renderer, sim.freespace, SIM.robot.radius_m, CAM, 0.5, 8, gt, 0.99,
+                                              0.05, 0.1, 0.01)
+    assert n_cand == n_cand2 == len(all_poses) == len(survey_views(sim.freespace, SIM.robot.radius_m, CAM, 0.5, 8))
+    assert len(poses) < len(all_poses) / 2
+    assert 0.99 * all_ceiling <= ceiling <= all_ceiling and all_ceiling > 0.3   # whole-mesh samples: ceiling, outsides
+    # the chosen poses are candidates, and together they show what the ceiling says
+    cand = {tuple(np.round(T[:3, 3], 9)) + (round(yaw_of(T), 9),) for T in all_poses}
+    assert all(tuple(np.round(T[:3, 3], 9)) + (round(yaw_of(T), 9),) in cand for T in poses)
+    shown = np.unique(np.concatenate(view_footprints(sim.renderer, poses, CAM, gt, 0.05, 0.1, 0.01)))
+    assert abs(len(shown) - ceiling * len(gt)) <= 0.002 * len(gt)   # per-view vs joint voxel downsampling
 
 
 def test_ground_truth_renders_are_static_only_even_when_people_are_in_view(sim):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 import time
@@ -85,6 +86,30 @@ def test_resume_refuses_other_settings(finished, capsys):
     assert bench.main(tiny_args(out, cache, "full", "mapping.weighted=false")) == 2
     err = capsys.readouterr().err
     assert err.startswith("dagsbench: error:") and "other settings" in err and err.count("\n") == 1
+
+
+def test_reevaluate_measures_finished_runs_again_from_their_logs(finished, tmp_path, capsys):
+    out, cache = finished
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    path = copy / "runs" / "full" / "tiny-00-seed0.json"
+    before = json.loads(path.read_text())
+    # weighted was never run: it is left alone, not started
+    assert bench.main(tiny_args(copy, cache, "baseline,weighted,full", "eval.n_views=3", "--reevaluate")) == 0
+    assert "2 finished runs re-evaluated" in capsys.readouterr().out
+    assert not (copy / "runs" / "weighted").exists()
+    after = json.loads(path.read_text())
+    assert after["eval_overrides"][-1] == "n_views=3" and after["eval_config"]["n_views"] == 3
+    assert after["coverage"] == before["coverage"] and after["config"] == before["config"]
+    for b, a in zip(before["checkpoints"], after["checkpoints"]):
+        # the log holds the map of every checkpoint, so the geometry is measured on the very same map
+        assert a["map_step"] == a["step"] == b["step"] and a["n_gaussians"] == b["n_gaussians"]
+        assert (a["acc_cm"], a["comp_cm"], a["cr_pct"]) == (b["acc_cm"], b["comp_cm"], b["cr_pct"])
+        assert a["n_views"] == 3 and b["n_views"] == 4
+    (copy / "runs" / "full" / "tiny-00-seed0.mcap").unlink()
+    assert bench.main(tiny_args(copy, cache, "full", "--reevaluate")) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("dagsbench: error:") and "tiny-00-seed0.mcap: missing" in err and err.count("\n") == 1
 
 
 @pytest.mark.parametrize("argv, words", [
