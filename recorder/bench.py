@@ -313,14 +313,13 @@ def reevaluate(specs: list[RunSpec], *, workers: int = 1, progress: bool = True)
         return []
     ov = specs[0].eval_overrides
     if workers > 1:
+        from dynactivegs.config import config_from_json
         from dynactivegs.eval.geometry import ground_truth_points, survey
 
         seen = set()
-        for s in specs:                      # the scene's ground truth and survey once, before the workers
+        for s in specs:                      # each scene's ground truth and survey once, before the workers
             if s.scene not in seen and s.metrics_path.is_file():
                 seen.add(s.scene)
-                from dynactivegs.config import config_from_json
-
                 sim = config_from_json(json.dumps(json.loads(s.metrics_path.read_text())["config"])).sim
                 ecfg = s.eval_config()
                 survey(sim, ecfg, ground_truth_points(sim, ecfg))
@@ -402,8 +401,9 @@ def run_ray(specs: list[RunSpec], address: str, gpu: bool) -> Iterator[dict[str,
 
 
 def prepare_ground_truth(specs: list[RunSpec]) -> None:
-    """Compute (or find cached) each scene's ground-truth points once, before parallel workers all would."""
-    from dynactivegs.eval.geometry import ground_truth_points
+    """Compute (or find cached) each scene's ground-truth points and survey views once, before parallel
+    workers all would."""
+    from dynactivegs.eval.geometry import ground_truth_points, survey
 
     seen = set()
     for spec in specs:
@@ -411,7 +411,9 @@ def prepare_ground_truth(specs: list[RunSpec]) -> None:
         key = (to_json(cfg.sim), to_json(ecfg))
         if key not in seen:
             seen.add(key)
-            ground_truth_points(cfg.sim, ecfg)
+            gt = ground_truth_points(cfg.sim, ecfg)
+            if ecfg.recon_method == "renders":
+                survey(cfg.sim, ecfg, gt)
 
 
 def sweep(specs: list[RunSpec], *, workers: int = 1, ray_address: str | None = None, gpu: bool = False,

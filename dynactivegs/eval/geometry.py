@@ -232,8 +232,8 @@ class Survey:
 
     def note(self) -> str:
         """How the views were chosen, for a reconstruction's description."""
-        return (f"{len(self.poses)} of {self.n_candidates} lattice views, chosen to cover the ground truth; "
-                f"a perfect map reaches C.R. {100 * self.ceiling:.1f} % from them")
+        return (f"{len(self.poses)} of {self.n_candidates} lattice views chosen to cover the ground truth "
+                f"(a perfect map reaches C.R. {100 * self.ceiling:.1f} % from them)")
 
 
 def survey(sim: SimConfig, cfg: EvalConfig, gt: GroundTruthPoints, *, renderer: Renderer | None = None,

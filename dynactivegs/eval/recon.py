@@ -108,6 +108,6 @@ def rendered_points(gaussians: Gaussians, poses: np.ndarray, K: np.ndarray, widt
     pts = np.concatenate(parts) if parts else np.zeros((0, 3))
     down = voxel_downsample(pts, voxel_m)
     edges = f", depth edges (jump > {edge_jump_rel:g} x depth) left out" if edge_jump_rel > 0 else ""
-    views = f" ({views_note})" if views_note else ""
-    return ReconPoints(down, "renders", f"back-projected depth of {len(poses)} renders{views} where alpha > "
-                                        f"{alpha_min:g}{edges}, {voxel_m * 100:g} cm voxels")
+    views = f"renders at {views_note}" if views_note else f"{len(poses)} renders"
+    return ReconPoints(down, "renders", f"back-projected depth of {views}, where alpha > {alpha_min:g}{edges}, "
+                                        f"{voxel_m * 100:g} cm voxels")

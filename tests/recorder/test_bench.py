@@ -29,6 +29,7 @@ def finished(tmp_path_factory):
     out, cache = tmp_path_factory.mktemp("bench"), tmp_path_factory.mktemp("cache")
     assert bench.main(tiny_args(out, cache, "baseline,full", "--workers", "2")) == 0
     assert len(list((cache / "gt_points").glob("tiny-00*.npz"))) == 1     # computed once, before the workers
+    assert len(list((cache / "survey").glob("tiny-00*.npz"))) == 1
     return out, cache
 
 
