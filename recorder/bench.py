@@ -322,22 +322,25 @@ def reevaluate(specs: list[RunSpec], *, workers: int = 1, progress: bool = True)
                 seen.add(s.scene)
                 sim = config_from_json(json.dumps(json.loads(s.metrics_path.read_text())["config"])).sim
                 ecfg = s.eval_config()
-                survey(sim, ecfg, ground_truth_points(sim, ecfg))
+                gt = ground_truth_points(sim, ecfg)
+                if ecfg.recon_method == "renders":
+                    survey(sim, ecfg, gt)
     bar = tqdm(total=len(paths), desc="re-evaluate", unit="run", disable=not progress, dynamic_ncols=True)
     out = []
     try:
         if workers <= 1:
-            stream: Iterator[dict[str, Any]] = (reevaluate_one(Path(p), ov) for p in paths)
+            for p in paths:
+                out.append(reevaluate_one(Path(p), ov))
+                bar.update(1)
         else:
             import multiprocessing as mp
             from concurrent.futures import ProcessPoolExecutor, as_completed
 
-            pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
-                                       initializer=_die_with_parent)
-            stream = (f.result() for f in as_completed([pool.submit(_reeval_worker, p, ov) for p in paths]))
-        for r in stream:
-            out.append(r)
-            bar.update(1)
+            with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
+                                     initializer=_die_with_parent) as pool:
+                for f in as_completed([pool.submit(_reeval_worker, p, ov) for p in paths]):
+                    out.append(f.result())
+                    bar.update(1)
     finally:
         bar.close()
     return out

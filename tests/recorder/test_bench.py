@@ -96,7 +96,8 @@ def test_reevaluate_measures_finished_runs_again_from_their_logs(finished, tmp_p
     path = copy / "runs" / "full" / "tiny-00-seed0.json"
     before = json.loads(path.read_text())
     # weighted was never run: it is left alone, not started
-    assert bench.main(tiny_args(copy, cache, "baseline,weighted,full", "eval.n_views=3", "--reevaluate")) == 0
+    assert bench.main(tiny_args(copy, cache, "baseline,weighted,full", "eval.n_views=3", "--reevaluate",
+                                "--workers", "2")) == 0
     assert "2 finished runs re-evaluated" in capsys.readouterr().out
     assert not (copy / "runs" / "weighted").exists()
     after = json.loads(path.read_text())
