@@ -33,7 +33,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Iterable, Iterator
 
 from dynactivegs.config import DagsConfig, PRESETS, preset, to_json, with_overrides
 from dynactivegs.errors import DagsError
@@ -314,17 +314,9 @@ def reevaluate(specs: list[RunSpec], *, workers: int = 1, progress: bool = True)
     ov = specs[0].eval_overrides
     if workers > 1:
         from dynactivegs.config import config_from_json
-        from dynactivegs.eval.geometry import ground_truth_points, survey
 
-        seen = set()
-        for s in specs:                      # each scene's ground truth and survey once, before the workers
-            if s.scene not in seen and s.metrics_path.is_file():
-                seen.add(s.scene)
-                sim = config_from_json(json.dumps(json.loads(s.metrics_path.read_text())["config"])).sim
-                ecfg = s.eval_config()
-                gt = ground_truth_points(sim, ecfg)
-                if ecfg.recon_method == "renders":
-                    survey(sim, ecfg, gt)
+        prepare_scenes((config_from_json(json.dumps(json.loads(Path(p).read_text())["config"])).sim,
+                        specs[0].eval_config()) for p in paths)
     bar = tqdm(total=len(paths), desc="re-evaluate", unit="run", disable=not progress, dynamic_ncols=True)
     out = []
     try:
@@ -403,20 +395,24 @@ def run_ray(specs: list[RunSpec], address: str, gpu: bool) -> Iterator[dict[str,
             ray.shutdown()
 
 
-def prepare_ground_truth(specs: list[RunSpec]) -> None:
-    """Compute (or find cached) each scene's ground-truth points and survey views once, before parallel
-    workers all would."""
+def prepare_scenes(setups: Iterable[tuple[Any, Any]]) -> None:
+    """Compute (or find cached) the ground-truth points and, for the renders reconstruction, the survey
+    views of each distinct (SimConfig, EvalConfig) once, before parallel workers all would."""
     from dynactivegs.eval.geometry import ground_truth_points, survey
 
     seen = set()
-    for spec in specs:
-        cfg, ecfg = spec.config(), spec.eval_config()
-        key = (to_json(cfg.sim), to_json(ecfg))
+    for sim, ecfg in setups:
+        key = (to_json(sim), to_json(ecfg))
         if key not in seen:
             seen.add(key)
-            gt = ground_truth_points(cfg.sim, ecfg)
+            gt = ground_truth_points(sim, ecfg)
             if ecfg.recon_method == "renders":
-                survey(cfg.sim, ecfg, gt)
+                survey(sim, ecfg, gt)
+
+
+def prepare_ground_truth(specs: list[RunSpec]) -> None:
+    """:func:`prepare_scenes` for the runs of ``specs``."""
+    prepare_scenes((spec.config().sim, spec.eval_config()) for spec in specs)
 
 
 def sweep(specs: list[RunSpec], *, workers: int = 1, ray_address: str | None = None, gpu: bool = False,

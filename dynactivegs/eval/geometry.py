@@ -175,6 +175,15 @@ def gt_cache_path(scene: Scene, sim: SimConfig, cfg: EvalConfig) -> Path:
     return cfg.resolved_cache_dir() / "gt_points" / f"{stem}-{gt_cache_key(scene, sim, cfg)}.npz"
 
 
+def _save_npz_atomically(path: Path, meta: dict, **arrays: np.ndarray) -> None:
+    """Write a cache file (``arrays`` and ``meta`` as JSON) to a temporary file, then rename it into place,
+    so that concurrent runs on one scene never read a half-written file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
+    np.savez(tmp, meta=np.array(json.dumps(meta)), **arrays)
+    os.replace(tmp, path)
+
+
 def ground_truth_points(sim: SimConfig, cfg: EvalConfig) -> GroundTruthPoints:
     """The ground-truth points of ``sim.scene``: loaded from the cache, or computed and cached.
 
@@ -208,10 +217,7 @@ def ground_truth_points(sim: SimConfig, cfg: EvalConfig) -> GroundTruthPoints:
     seconds = time.perf_counter() - t0
     meta = dict(key=key, scene=scene.name, params=gt_parameters(sim, cfg), n_viewpoints=len(vps),
                 visible_fraction=frac, seconds=seconds)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
-    np.savez(tmp, points_m=pts32, face_idx=faces, meta=np.array(json.dumps(meta)))
-    os.replace(tmp, path)
+    _save_npz_atomically(path, meta, points_m=pts32, face_idx=faces)
     return GroundTruthPoints(pts32.astype(np.float64), faces, key, path, False, len(vps), frac, seconds)
 
 
@@ -267,11 +273,8 @@ def survey(sim: SimConfig, cfg: EvalConfig, gt: GroundTruthPoints, *, renderer: 
                                              cfg.survey_yaws, gt.points_m, cfg.survey_cover,
                                              cfg.cr_threshold_cm / 100.0, cfg.edge_jump_rel, cfg.voxel_m, gt_tree)
     seconds = time.perf_counter() - t0
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f"{path.stem}.{os.getpid()}.tmp.npz")
-    np.savez(tmp, poses=poses, meta=np.array(json.dumps(dict(key=key, params=params, n_candidates=n_cand,
-                                                                  ceiling=ceiling, seconds=seconds))))
-    os.replace(tmp, path)
+    _save_npz_atomically(path, dict(key=key, params=params, n_candidates=n_cand, ceiling=ceiling, seconds=seconds),
+                         poses=poses)
     return Survey(poses, n_cand, ceiling, False, seconds)
 
 
