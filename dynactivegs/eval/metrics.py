@@ -97,7 +97,8 @@ class SceneEvaluator:
         cam = self.sim.camera
         return rendered_points(gaussians, self.survey_poses, self.K, cam.width_px, cam.height_px,
                                alpha_min=self.cfg.alpha_min, edge_jump_rel=self.cfg.edge_jump_rel,
-                               voxel_m=self.cfg.voxel_m, backend=backend, views_note=self.survey.note())
+                               voxel_m=self.cfg.voxel_m, backend=backend, near_plane=cam.min_depth_m,
+                               views_note=self.survey.note())
 
     def heldout(self, trajectory_xy_m: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Held-out poses (V, 4, 4) away from the trajectory (T, 2), and their static-only rgb and depth."""
@@ -118,7 +119,7 @@ class SceneEvaluator:
                                gt_faces=self.gt.face_idx, triangles_m=self.scene.triangles_m)
         poses, rgb, depth = self.heldout(trajectory_xy_m)
         ren = render_metrics(gaussians, poses, rgb, depth, self.K, lpips_model=self.lpips_model,
-                             lpips_note=self.lpips_note, backend=backend)
+                             lpips_note=self.lpips_note, backend=backend, near_plane=self.sim.camera.min_depth_m)
         return Metrics(step=step, acc_cm=geo.acc_cm, comp_cm=geo.comp_cm, cr_pct=geo.cr_pct,
                        cr_threshold_cm=geo.cr_threshold_cm, recon_method=rec.method,
                        recon_description=rec.description, n_recon_points=geo.n_recon, n_gt_points=geo.n_gt,

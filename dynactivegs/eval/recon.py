@@ -10,7 +10,10 @@
   above ``alpha_min`` is back-projected at its expected depth. This measures the surface the
   map shows, as a mesh extracted from rendered depth would. Expected depth blends the two
   sides of a depth edge into "flying" pixels between them; as in depth fusion, pixels that
-  sit on a depth edge (:func:`depth_edge_mask`) are left out.
+  sit on a depth edge (:func:`depth_edge_mask`) are left out. Gaussians nearer to the camera
+  than its minimum depth are not rendered, as the ground truth sees nothing that near: a
+  survey view can stand where the robot never did, next to a wall, and a Gaussian of that
+  wall a few centimetres from the lens would otherwise cover the whole image.
 
 Both are voxel-downsampled (centroid per voxel, 1 cm by default).
 """
@@ -24,7 +27,7 @@ import torch
 
 from dynactivegs.eval.geometry import voxel_downsample
 from dynactivegs.splat.gaussians import Gaussians
-from dynactivegs.splat.render import Backend, render
+from dynactivegs.splat.render import NEAR_PLANE, Backend, render
 
 
 @dataclass(frozen=True)
@@ -89,16 +92,18 @@ def depth_edge_mask(depth_m: np.ndarray, valid: np.ndarray, jump_rel: float) -> 
 
 def rendered_points(gaussians: Gaussians, poses: np.ndarray, K: np.ndarray, width: int, height: int, *,
                     alpha_min: float = 0.9, edge_jump_rel: float = 0.1, voxel_m: float = 0.01,
-                    backend: Backend = "auto", views_note: str = "") -> ReconPoints:
+                    backend: Backend = "auto", near_plane: float = NEAR_PLANE, views_note: str = "") -> ReconPoints:
     """Back-projected depth of renders at ``poses`` (V, 4, 4) where the accumulated opacity exceeds ``alpha_min``,
     leaving out depth-edge pixels (:func:`depth_edge_mask` with ``edge_jump_rel``; 0 keeps every pixel).
+    Gaussians nearer than ``near_plane`` (m) are not rendered: give the camera's minimum depth, the range
+    below which the ground truth sees nothing either.
     ``views_note``: how the poses were chosen, for the description."""
     assert poses.ndim == 3 and poses.shape[1:] == (4, 4)
     parts = []
     if len(gaussians):
         with torch.no_grad():
             for T in poses:
-                out = render(gaussians, K, T, width, height, backend=backend)
+                out = render(gaussians, K, T, width, height, backend=backend, near_plane=near_plane)
                 depth = out.depth.detach().to("cpu", torch.float64).numpy()
                 alpha = out.alpha.detach().to("cpu", torch.float64).numpy()
                 keep = (alpha > alpha_min) & (depth > 0)
@@ -109,5 +114,5 @@ def rendered_points(gaussians: Gaussians, poses: np.ndarray, K: np.ndarray, widt
     down = voxel_downsample(pts, voxel_m)
     edges = f", depth edges (jump > {edge_jump_rel:g} x depth) left out" if edge_jump_rel > 0 else ""
     views = f"renders at {views_note}" if views_note else f"{len(poses)} renders"
-    return ReconPoints(down, "renders", f"back-projected depth of {views}, where alpha > {alpha_min:g}{edges}, "
-                                        f"{voxel_m * 100:g} cm voxels")
+    return ReconPoints(down, "renders", f"back-projected depth of {views} (near plane {near_plane * 100:g} cm), "
+                                        f"where alpha > {alpha_min:g}{edges}, {voxel_m * 100:g} cm voxels")

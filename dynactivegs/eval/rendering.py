@@ -20,7 +20,7 @@ import torch
 from dynactivegs.eval.lpips import LPIPS_MIN_PX, LpipsAlex
 from dynactivegs.splat.gaussians import Gaussians
 from dynactivegs.splat.losses import psnr, ssim
-from dynactivegs.splat.render import Backend, render
+from dynactivegs.splat.render import NEAR_PLANE, Backend, render
 
 
 def _image(rgb: np.ndarray | torch.Tensor) -> torch.Tensor:
@@ -73,10 +73,12 @@ class RenderMetrics:
 
 def render_metrics(gaussians: Gaussians, poses: np.ndarray, true_rgb: np.ndarray, true_depth_m: np.ndarray,
                    K: np.ndarray, *, lpips_model: LpipsAlex | None = None, lpips_note: str = "",
-                   backend: Backend = "auto") -> RenderMetrics:
+                   backend: Backend = "auto", near_plane: float = NEAR_PLANE) -> RenderMetrics:
     """Render the map at ``poses`` (V, 4, 4) and compare with the true rgb (V, H, W, 3) and depth (V, H, W).
 
-    Renders use a black background, like the simulator's images where no surface is hit.
+    Renders use a black background, like the simulator's images where no surface is hit, and
+    leave out Gaussians nearer than ``near_plane`` (m): give the camera's minimum depth, at which
+    the true images were clipped too.
     """
     assert poses.ndim == 3 and poses.shape[1:] == (4, 4)
     v, h, w = true_depth_m.shape
@@ -86,7 +88,7 @@ def render_metrics(gaussians: Gaussians, poses: np.ndarray, true_rgb: np.ndarray
     ps, ss, ds, lp = [], [], [], []
     with torch.no_grad():
         for i, T in enumerate(poses):
-            out = render(gaussians, K, T, w, h, backend=backend)
+            out = render(gaussians, K, T, w, h, backend=backend, near_plane=near_plane)
             pred = out.rgb.detach().to("cpu", torch.float64).clamp(0, 1)
             true = _image(true_rgb[i])
             ps.append(psnr(pred, true))

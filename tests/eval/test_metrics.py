@@ -11,7 +11,8 @@ from dynactivegs.config import CameraConfig, CrowdConfig, SimConfig
 from dynactivegs.eval.config import EvalConfig
 from dynactivegs.eval.geometry import geometry_metrics, voxel_downsample
 from dynactivegs.eval.metrics import Metrics, SceneEvaluator
-from dynactivegs.eval.recon import backproject_depth, depth_edge_mask
+from dynactivegs.eval.recon import backproject_depth, depth_edge_mask, rendered_points
+from dynactivegs.eval.rendering import render_metrics
 from dynactivegs.rng import derive_rng
 from dynactivegs.sim.world import Simulator
 from dynactivegs.splat import Gaussians
@@ -87,3 +88,31 @@ def test_centre_points_of_an_rgbd_map_lie_on_the_ground_truth_surface(evaluator)
     # Centres are exact surface points, and Acc is measured to the surface (not to the ~2 cm spaced samples).
     assert m.acc_cm < 0.5 and m.recon_method == "centres"
     assert not math.isnan(m.comp_cm)
+
+
+def test_gaussians_nearer_than_the_cameras_minimum_depth_do_not_count(evaluator):
+    """The true images see nothing nearer than the camera's minimum depth; the map's renders leave it out too,
+    or one Gaussian a few cm in front of a survey or held-out camera would cover its whole image."""
+    import torch
+
+    sim = Simulator(SIM, 0)
+    T = evaluator.survey_poses[0]
+    g = rgbd_map(sim, T[None])
+    near_m = 0.5 * SIM.camera.min_depth_m
+    blob = Gaussians.from_params(torch.tensor(T[:3, :3] @ [0.0, 0.0, near_m] + T[:3, 3], dtype=torch.float32)[None],
+                                 torch.full((1, 3), 0.06), torch.tensor([[1.0, 0.0, 0.0, 0.0]]),
+                                 torch.tensor([0.99]), torch.tensor([[0.2, 0.8, 0.2]]))
+    with_blob = Gaussians.cat([g, blob])
+    K, w, h = evaluator.K, SIM.camera.width_px, SIM.camera.height_px
+    clean = rendered_points(g, T[None], K, w, h, near_plane=SIM.camera.min_depth_m, backend="cpu")
+    clipped = rendered_points(with_blob, T[None], K, w, h, near_plane=SIM.camera.min_depth_m, backend="cpu")
+    unclipped = rendered_points(with_blob, T[None], K, w, h, near_plane=0.01, backend="cpu")
+    assert np.array_equal(clean.points_m, clipped.points_m)
+    # unclipped, the blob hides most of the scene behind a few voxels next to the camera
+    assert np.linalg.norm(unclipped.points_m - T[:3, 3], axis=1).min() < SIM.camera.min_depth_m
+    assert len(unclipped.points_m) < 0.75 * len(clean.points_m)
+    assert f"near plane {100 * SIM.camera.min_depth_m:g} cm" in evaluator.recon_points(g, backend="cpu").description
+    rgb, depth = sim.render_static(T).rgb[None], sim.render_static(T).depth_m[None]
+    kept, blocked = (render_metrics(with_blob, T[None], rgb, depth, K, near_plane=p, backend="cpu")
+                     for p in (SIM.camera.min_depth_m, 0.01))
+    assert kept.psnr_db > blocked.psnr_db + 10.0 and kept.depth_l1_cm < blocked.depth_l1_cm / 10
