@@ -102,9 +102,10 @@ class RunResult:
     collisions: int
 
 
-def run(cfg: DagsConfig, steps: int, *, sink: StepSink | None = None, refine_iters: int = 0,
+def run(cfg: DagsConfig, steps: int, *, sink: StepSink | None = None, refine: bool = False,
         progress: Callable[[int, dict[str, float]], None] | None = None) -> RunResult:
-    """The closed loop for ``steps`` steps from a fresh simulator, then ``refine_iters`` of refinement.
+    """The closed loop for ``steps`` steps from a fresh simulator, then (``refine``) the map's offline
+    refinement (:func:`refine_map`). The sink sees the map before refinement.
 
     ``progress(k, metrics)`` is called after each step (for a progress bar).
     """
@@ -131,10 +132,19 @@ def run(cfg: DagsConfig, steps: int, *, sink: StepSink | None = None, refine_ite
         frame, truth = sim.step(rec.planning.action)
         collisions += int(truth.collided)
     elapsed = time.perf_counter() - t_start
-    if refine_iters > 0:
-        m_state = mapping_stage.refine(cfg.mapping, states[1], refine_iters, derive_rng(cfg.seed, "refine"))
-        states = [states[0], m_state, *states[2:]]
+    if refine:
+        states = refine_map(cfg, states)
     return RunResult(states, steps, np.asarray(traj, np.float64).reshape(-1, 2), elapsed / steps, collisions)
+
+
+def refine_map(cfg: DagsConfig, states: list[object],
+               progress: Callable[[int], None] | None = None) -> list[object]:
+    """The stage states with the map after the offline refinement over all keyframes (DESIGN.md §5,
+    ``mapping.refine_passes`` passes; :func:`dynactivegs.mapping.stage.refine`). Its random order comes
+    from the seed alone. ``progress(k)`` is called after each Adam step."""
+    iters = mapping_stage.refine_iters(cfg.mapping, states[1])
+    m_state = mapping_stage.refine(cfg.mapping, states[1], iters, derive_rng(cfg.seed, "refine"), progress)
+    return [states[0], m_state, *states[2:]]
 
 
 def step_metrics(rec: StepRecord, timings: dict[str, float]) -> dict[str, float]:

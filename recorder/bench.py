@@ -3,9 +3,12 @@
 Every run is independent: it builds its config (preset, scene, seed, ``--set`` overrides),
 runs the closed loop with an MCAP sink (unless ``--no-mcap``), snapshots the Gaussian map at
 the checkpoints of :func:`dynactivegs.eval.progress.checkpoint_steps`, measures a cheap
-coverage every few steps, and after the loop evaluates the snapshots with
-:class:`dynactivegs.eval.metrics.SceneEvaluator`. The held-out views avoid the run's whole
-trajectory, so every checkpoint of a run is measured on the same views.
+coverage every few steps, refines the map after the last step (``mapping.refine_passes``, the
+method's offline refinement; the log keeps it on ``/map_refined``), and evaluates the
+snapshots with :class:`dynactivegs.eval.metrics.SceneEvaluator`. The 25/50/75 % rows measure
+the map as the loop left it at that step; the 100 % row measures the refined map, the
+method's output, and keeps the unrefined map's metrics under ``online``. The held-out views
+avoid the run's whole trajectory, so every checkpoint of a run is measured on the same views.
 
 Layout of ``--out``::
 
@@ -155,9 +158,11 @@ class _ProgressSink:
         self.last = last
         self.snapshots: dict[int, Any] = {}
         self.coverage: list[tuple[int, float]] = []
+        self.last_stamp_ns = 0
 
     def on_step(self, rec: Any, truth: Any, states: list[object], metrics: dict[str, float]) -> None:
         done = rec.frame.step + 1                     # steps taken so far
+        self.last_stamp_ns = rec.frame.stamp_ns
         g = states[1].gaussians
         if done in self.checkpoints:
             from dynactivegs.splat.gaussians import Gaussians
@@ -176,11 +181,29 @@ class _Fanout:
             s.on_step(rec, truth, states, metrics)
 
 
+ONLINE_KEYS = ("acc_cm", "comp_cm", "cr_pct", "psnr_db", "ssim", "depth_l1_cm", "lpips")
+"""Metrics of the unrefined final map kept in the 100 % row under ``online``."""
+
+
+def evaluate_row(evaluator: Any, fraction: float, step: int, g: Any, trajectory_xy_m: Any, refined: Any,
+                 iters: int, **extra: Any) -> dict[str, Any]:
+    """One checkpoint row: the metrics of ``refined`` (with ``online``: those of ``g``) or, when it is None, of ``g``.
+    ``refine_iters`` says which (0: ``g``, the map as the loop left it)."""
+    m = evaluator.evaluate(g, step=step, trajectory_xy_m=trajectory_xy_m)
+    if refined is None:
+        return {"fraction": fraction, "n_gaussians": len(g), **extra, "refine_iters": 0, **dataclasses.asdict(m)}
+    r = evaluator.evaluate(refined, step=step, trajectory_xy_m=trajectory_xy_m)
+    online = {"n_gaussians": len(g), **{k: getattr(m, k) for k in ONLINE_KEYS}}
+    return {"fraction": fraction, "n_gaussians": len(refined), **extra, "refine_iters": iters,
+            **dataclasses.asdict(r), "online": online}
+
+
 def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
     """Run ``spec``, evaluate it at its checkpoints and write its metrics file (atomically); returns its contents."""
     from dynactivegs import pipeline
     from dynactivegs.eval.metrics import SceneEvaluator
     from dynactivegs.eval.progress import CHECKPOINT_FRACTIONS, checkpoint_steps
+    from dynactivegs.mapping.stage import refine_iters
 
     if torch_threads is not None:
         import torch
@@ -211,13 +234,25 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
             writer.abort()
         raise
     t_run = time.perf_counter() - t1
+    t_ref = time.perf_counter()
+    iters = refine_iters(cfg.mapping, res.states[1])
+    refined = None
+    try:
+        if iters > 0:
+            refined = pipeline.refine_map(cfg, res.states)[1].gaussians
+            if writer is not None:
+                writer.write_refined_map(refined, progress.last_stamp_ns + 1)
+    except BaseException:
+        if writer is not None:
+            writer.abort()
+        raise
+    t_ref = time.perf_counter() - t_ref
     if writer is not None:
-        writer.close({"interrupted": "false", "seconds": f"{t_run:.3f}"})
+        writer.close({"interrupted": "false", "seconds": f"{t_run:.3f}", "refine_seconds": f"{t_ref:.3f}"})
     t2 = time.perf_counter()
-    rows = []
-    for frac, step in zip(CHECKPOINT_FRACTIONS, checkpoints):
-        m = evaluator.evaluate(progress.snapshots[step], step=step, trajectory_xy_m=res.trajectory_xy_m)
-        rows.append({"fraction": frac, "n_gaussians": len(progress.snapshots[step]), **dataclasses.asdict(m)})
+    rows = [evaluate_row(evaluator, frac, step, progress.snapshots[step], res.trajectory_xy_m,
+                         refined if step == spec.steps else None, iters)
+            for frac, step in zip(CHECKPOINT_FRACTIONS, checkpoints)]
     result = {
         "version": RESULT_VERSION, "preset": spec.preset, "scene": spec.scene, "seed": spec.seed,
         "steps": spec.steps, "overrides": list(spec.overrides), "eval_overrides": list(spec.eval_overrides),
@@ -225,7 +260,8 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
         "checkpoints": rows, "coverage": [[s, c] for s, c in progress.coverage],
         "coverage_note": f"% of {len(evaluator.coverage_probe().points_m)} ground-truth points within "
                          f"{ecfg.cr_threshold_cm:g} cm of an opaque Gaussian centre",
-        "seconds_per_step": res.seconds_per_step, "seconds_run": t_run, "seconds_eval": time.perf_counter() - t2,
+        "seconds_per_step": res.seconds_per_step, "seconds_run": t_run, "seconds_refine": t_ref,
+        "seconds_eval": time.perf_counter() - t2,
         "seconds_setup": t_setup, "collisions": res.collisions,
         "mcap": spec.mcap_path.name if spec.mcap else None,
     }
@@ -235,10 +271,11 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
     return result
 
 
-def _logged_maps(mcap_path: Path, steps: list[int]) -> tuple[dict[int, tuple[int, Any]], Any]:
-    """From a run's log: for each wanted step index, (the logged step used, its map snapshot), and the
-    trajectory (T, 2) from ``/truth``. The snapshot at the step itself is used when logged, else the
-    nearest later one (logs written before checkpoint snapshots were added have them every 50 steps)."""
+def _logged_maps(mcap_path: Path, steps: list[int]) -> tuple[dict[int, tuple[int, Any]], Any, Any]:
+    """From a run's log: for each wanted step index, (the logged step used, its map snapshot), the
+    trajectory (T, 2) from ``/truth`` and the refined map (None if the log has none). The snapshot at the
+    step itself is used when logged, else the nearest later one (logs written before checkpoint snapshots
+    were added have them every 50 steps)."""
     import numpy as np
 
     from replay.source import LogReader
@@ -259,7 +296,7 @@ def _logged_maps(mcap_path: Path, steps: list[int]) -> tuple[dict[int, tuple[int
                             f"{reader.end.last_step if reader.end else '?'}); re-run it instead")
         k = min(later)
         maps[want] = (k, logged[k][MAP_TOPIC])
-    return maps, np.asarray(traj, np.float64).reshape(-1, 2)
+    return maps, np.asarray(traj, np.float64).reshape(-1, 2), reader.refined_map()
 
 
 def reevaluate_one(metrics_path: Path, eval_overrides: tuple[str, ...] = ()) -> dict[str, Any]:
@@ -282,13 +319,14 @@ def reevaluate_one(metrics_path: Path, eval_overrides: tuple[str, ...] = ()) -> 
     t0 = time.perf_counter()
     evaluator = SceneEvaluator(cfg.sim, ecfg)
     old_rows = done["checkpoints"]
-    maps, traj = _logged_maps(mcap_path, [r["step"] - 1 for r in old_rows])
+    maps, traj, refined = _logged_maps(mcap_path, [r["step"] - 1 for r in old_rows])
+    last = max(r["step"] for r in old_rows)
     rows = []
     for r in old_rows:
         used, g = maps[r["step"] - 1]
-        m = evaluator.evaluate(g, step=r["step"], trajectory_xy_m=traj)
-        rows.append({"fraction": r["fraction"], "n_gaussians": len(g), "map_step": used + 1,
-                     **dataclasses.asdict(m)})
+        final = refined if r["step"] == last else None
+        rows.append(evaluate_row(evaluator, r["fraction"], r["step"], g, traj, final,
+                                 r.get("refine_iters", 0) if final is not None else 0, map_step=used + 1))
     done.update(checkpoints=rows, eval_overrides=list(eval_overrides), eval_config=json.loads(to_json(ecfg)),
                 seconds_eval=time.perf_counter() - t0, reevaluated=time.strftime("%Y-%m-%d"))
     tmp = metrics_path.with_suffix(".json.tmp")

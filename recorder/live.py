@@ -4,14 +4,17 @@
 a :class:`McapSink` (``--record``) and a :class:`RerunStepSink` (``--rrd``), shows a progress
 bar, and on Ctrl-C stops after the step in progress, so the log ends with a whole step and
 is closed cleanly (a second Ctrl-C stops at once; the log still replays up to its last
-whole step, because every step is its own chunk on disk).
+whole step, because every step is its own chunk on disk). After the step budget the map is
+refined over all keyframes (``mapping.refine_passes``, with its own progress bar); a Ctrl-C
+there stops the refinement and the log keeps every step, without a refined map.
 
 What the MCAP log holds per step (``docs/log_schema.md``): the frame and every stage output
 (``/frame``, ``/perception`` ... ``/planning``), the simulator's ground truth on ``/truth``,
 the step's metrics on ``/metrics``, and every ``map_every`` steps and at the last step the
-Gaussian map on ``/map``. No stage state is snapshotted: ``dagsreplay`` rebuilds the
-initial states from the config in the metadata and fast-forwards (see
-:mod:`replay.engine`).
+Gaussian map on ``/map``; after the last step, the map after the offline refinement on
+``/map_refined`` (and on the Rerun timeline one step past the last). No stage state is
+snapshotted: ``dagsreplay`` rebuilds the initial states from the config in the metadata and
+fast-forwards (see :mod:`replay.engine`).
 """
 
 from __future__ import annotations
@@ -105,12 +108,14 @@ class _Fanout:
     trajectory: list[tuple[float, float]] = field(default_factory=list)
     collisions: int = 0
     last_metrics: dict[str, float] = field(default_factory=dict)
+    last_stamp_ns: int = 0
 
     def on_step(self, rec: StepRecord, truth: SimTruth, states: list[object], metrics: dict[str, float]) -> None:
         metrics = {**metrics, "known_area_m2": known_area_m2(states[3])}
         for s in self.sinks:
             s.on_step(rec, truth, states, metrics)
         self.states, self.steps, self.last_metrics = states, self.steps + 1, metrics
+        self.last_stamp_ns = rec.frame.stamp_ns
         self.trajectory.append((truth.robot.x_m, truth.robot.y_m))
         self.collisions += int(truth.collided)
 
@@ -130,6 +135,8 @@ class LiveResult:
     log_path: Path | None
     log_bytes: int
     rrd_path: Path | None
+    refine_iters: int = 0
+    """Adam steps of the offline refinement that ``states`` include (0: the map as the last step left it)."""
 
     @property
     def seconds_per_step(self) -> float:
@@ -175,8 +182,17 @@ def record_run(cfg: DagsConfig, steps: int, *, record: Path | None = None, rrd: 
         signal.signal(signal.SIGINT, on_sigint)
     t0 = time.perf_counter()
     interrupted = False
+    refined = 0
     try:
         pipeline.run(cfg, steps, sink=fan, progress=on_progress)
+        if bar is not None:
+            bar.close()
+        refined = _refine(cfg, fan, stop, progress)
+        if refined:
+            if writer is not None:
+                writer.write_refined_map(fan.states[1].gaussians, fan.last_stamp_ns + 1)
+            if rerun is not None:
+                rerun.log_refined_map(fan.states[1].gaussians, steps, fan.last_stamp_ns + 1)
     except _Stop:
         interrupted = True
     except BaseException:
@@ -194,7 +210,37 @@ def record_run(cfg: DagsConfig, steps: int, *, record: Path | None = None, rrd: 
     if writer is not None:
         writer.close({"interrupted": str(interrupted).lower(), "seconds": f"{seconds:.3f}"})
     return LiveResult(fan.steps, steps, seconds, interrupted, fan.states or [], np.asarray(fan.trajectory).reshape(-1, 2),
-                      fan.collisions, fan.last_metrics, record, writer.bytes_written if writer else 0, rrd)
+                      fan.collisions, fan.last_metrics, record, writer.bytes_written if writer else 0, rrd, refined)
+
+
+def _refine(cfg: DagsConfig, fan: _Fanout, stop: dict[str, bool], progress: bool) -> int:
+    """Refines the map in ``fan.states`` (DESIGN.md §5) with a progress bar; returns the Adam steps taken (0: none).
+    Raises :class:`_Stop` after a Ctrl-C (checked after every Adam step)."""
+    from dynactivegs.mapping.stage import refine_iters
+
+    if fan.states is None:
+        return 0
+    iters = refine_iters(cfg.mapping, fan.states[1])
+    if iters == 0:
+        return 0
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=iters, desc="refine", unit="it", dynamic_ncols=True)
+
+    def on_iter(k: int) -> None:
+        if bar is not None:
+            bar.update(1)
+        if stop["asked"]:
+            raise _Stop
+
+    try:
+        fan.states = pipeline.refine_map(cfg, fan.states, on_iter)
+    finally:
+        if bar is not None:
+            bar.close()
+    return iters
 
 
 def _bar(total: int, scene: str) -> Any:

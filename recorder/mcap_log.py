@@ -55,6 +55,9 @@ STATE_TOPIC_PREFIX = "/state/"
 
 MAP_TOPIC = "/map"
 """An occasional snapshot of the Gaussian map (a state snapshot of a ``Gaussians`` object)."""
+REFINED_MAP_TOPIC = "/map_refined"
+"""The map after the offline refinement, written once after the last step, in a chunk of its own and outside any
+step (no ``/step_end``); :meth:`replay.source.LogReader.refined_map` reads it."""
 
 STAGE_TOPICS: dict[str, str] = {"perception": "/perception", "mapping": "/mapping", "fields": "/fields",
                                 "selection": "/selection", "planning": "/planning"}
@@ -267,6 +270,22 @@ class LogWriter:
     def write_map(self, gaussians: object, stamp_ns: int) -> None:
         """Snapshot of the Gaussian map on ``/map`` (any value :func:`encode_state` accepts)."""
         self.write_raw(MAP_TOPIC, "state", encode_state(gaussians), stamp_ns)
+
+    def write_refined_map(self, gaussians: object, stamp_ns: int) -> None:
+        """The map after the offline refinement on ``/map_refined`` (after the last :meth:`end_step`), written to
+        disk at once in its own chunk. A log cut before it still replays every step; it then has no refined map."""
+        if self._step_topics:
+            raise ValueError("end the step in progress before writing the refined map")
+        self.write_raw(REFINED_MAP_TOPIC, "state", encode_state(gaussians), stamp_ns)
+
+        def flush() -> None:
+            self._mcap.flush()
+            if self._fsync:
+                self._file.fsync()
+
+        self._io(flush)
+        self._good_offset = self._file.tell()
+        self._step_topics.clear()
 
     def write_metrics(self, step: int, values: Mapping[str, float], stamp_ns: int) -> None:
         """Scalar metrics of this step on ``/metrics``."""

@@ -199,6 +199,11 @@ class RerunSink:
         self.rec.log("world/map", rr.Points3D(pts, colors=colormap(pts[:, 2], 0.0, 2.5, "cividis"),
                                               radii=0.5 * mapping.surface_voxel_m))
 
+    def log_refined_map(self, gaussians: Any, step: int, stamp_ns: int) -> None:
+        """The map after the offline refinement, at ``step`` (one past the last) on the timeline."""
+        self.set_time(step, stamp_ns)
+        self._gaussians(gaussians)
+
     def _gaussians(self, g: Any) -> None:
         means, rgb = (np.asarray(_numpy(x), np.float64) for x in (g.means, g.rgb))
         idx = _subsample(len(means), self.max_map_points, len(means))

@@ -25,7 +25,8 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 from dynactivegs import records
 from dynactivegs.errors import DagsError
 from recorder.codec import StepEnd, check_schema_version, decode, decode_fields_delta, decode_state, encode, type_name
-from recorder.mcap_log import END_METADATA_NAME, MAP_TOPIC, METADATA_NAME, STAGE_TOPICS, STATE_TOPIC_PREFIX, TOPICS
+from recorder.mcap_log import (END_METADATA_NAME, MAP_TOPIC, METADATA_NAME, REFINED_MAP_TOPIC, STAGE_TOPICS,
+                               STATE_TOPIC_PREFIX, TOPICS)
 
 _MAGIC = b"\x89MCAP0\r\n"
 _RECORD_HEADER = struct.Struct("<BQ")   # opcode, length of the record body
@@ -134,6 +135,7 @@ class LogReader:
         """Set once :meth:`steps` has read to the end of the file."""
         self.end_metadata: dict[str, str] = {}
         """The ``dynactivegs.end`` metadata record of a cleanly closed log (steps, last_step, ...)."""
+        self._refined: bytes | None = None          # /map_refined, once read through
 
     @property
     def seed(self) -> int | None:
@@ -214,6 +216,9 @@ class LogReader:
                         if topic is None:
                             raise DagsError(f"corrupt log {self.path}: message on unknown channel {r.channel_id} "
                                             f"in the chunk ending at byte {pos}")
+                        if topic == REFINED_MAP_TOPIC:
+                            self._refined = r.data      # written after the last step, outside any step
+                            continue
                         if topic != "/step_end":
                             pending[topic] = r.data
                             continue
@@ -248,6 +253,14 @@ class LogReader:
             raise DagsError(f"corrupt log {self.path}: step {step}'s /fields is a delta with no earlier /fields")
         full = decode_fields_delta(data, prev)
         return full, encode(full)
+
+    def refined_map(self) -> Any:
+        """The map after the offline refinement (``/map_refined``), or None when the run wrote none (no
+        refinement, or the run was stopped before it ended). Reads the file through if :meth:`steps` has not."""
+        if self.end is None:
+            for _ in self.steps():
+                pass
+        return decode_state(self._refined) if self._refined is not None else None
 
     def __iter__(self) -> Iterator[LoggedStep]:
         return self.steps()

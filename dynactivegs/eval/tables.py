@@ -172,8 +172,11 @@ def main_table(runs: Sequence[dict[str, Any]], metrics: Sequence[str] = ("acc_cm
                                 "n_seeds": c.n, "best": flags[j][i]})
     n_seeds = len({r["seed"] for r in runs})
     steps = sorted({r["steps"] for r in runs})
+    refined = sorted({_checkpoint(r, fraction).get("refine_iters", 0) > 0 for r in runs})
+    which = {(True,): "; the map after the offline refinement",
+             (False, True): "; refined maps and unrefined ones (runs without refinement)"}.get(tuple(refined), "")
     note = (f"{len(runs)} runs; {n_seeds} seed(s); metrics at {fraction:.0%} of a budget of "
-            f"{'/'.join(map(str, steps))} steps; mean ± std over seeds; best in bold.")
+            f"{'/'.join(map(str, steps))} steps{which}; mean ± std over seeds; best in bold.")
     return Table(f"Main results ({fraction:.0%} of the budget)", header, tuple(rows), tuple(best), tuple(records), note,
                  n_lead=2)
 

@@ -81,6 +81,9 @@ class MappingConfig:
     """Adam learning rate of the opacity logits."""
     lr_sh0: float = 2e-2
     """Adam learning rate of the colour coefficients."""
+    refine_passes: float = 3.0
+    """Offline refinement after the step budget (DESIGN.md §5): this many passes over all keyframes, one Adam
+    step per keyframe per pass (:func:`dynactivegs.mapping.stage.refine_iters`); 0: none."""
     device: str = "cpu"
     """cpu (the numba rasterizer) or cuda (gsplat; needs the [cuda] extra)."""
 
@@ -114,6 +117,7 @@ class MappingConfig:
         c(0 < self.surface_opacity < 1, "mapping.surface_opacity", self.surface_opacity, "in (0, 1)")
         for name in ("lr_means", "lr_log_scales", "lr_quats", "lr_opacity", "lr_sh0"):
             c(getattr(self, name) > 0, f"mapping.{name}", getattr(self, name), "> 0")
+        c(0 <= self.refine_passes <= 100, "mapping.refine_passes", self.refine_passes, "in [0, 100] (0: no refinement)")
         c(self.device in ("cpu", "cuda"), "mapping.device", self.device, "cpu or cuda")
 
     @property

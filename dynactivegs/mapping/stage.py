@@ -62,7 +62,8 @@ Per step t (``step``), given frame t, its pose and beta_t from perception:
    its pixel is within that margin of it. A Gaussian with at least ``vote_min_free`` free
    votes and more free than support votes goes.
 
-``refine`` is the offline refinement after the episode: the same loss over all keyframes.
+``refine`` is the offline refinement after the episode: the same loss over all keyframes,
+``refine_passes`` times over (:func:`refine_iters`), then a prune.
 All tensors are float32 on the CPU by default (``device="cuda"`` uses gsplat when available).
 """
 
@@ -346,6 +347,11 @@ def step(cfg: MappingConfig, rec: StepRecord, state: MappingState,
                      surface_ijk=surface_voxels(cfg, g), surface_voxel_m=cfg.surface_voxel_m,
                      n_gaussians=len(g), n_added=n_added, n_pruned=n_pruned, loss=loss, keyframe=is_key)
     return MappingState(g, adam, keyframes, state.steps + 1), out
+
+
+def refine_iters(cfg: MappingConfig, state: MappingState) -> int:
+    """Adam steps of the offline refinement: ``refine_passes`` times the number of keyframes."""
+    return int(round(cfg.refine_passes * len(state.keyframes)))
 
 
 def refine(cfg: MappingConfig, state: MappingState, iters: int, rng: np.random.Generator,

@@ -170,6 +170,9 @@ def test_refinement_lowers_the_loss_over_all_keyframes():
     refined = mapping.refine(cfg, ms, 60, derive_rng(0, "refine"))
     after = total(refined)
     assert after < 0.9 * before, f"keyframe loss {before:.4f} -> {after:.4f} after 60 refinement steps"
+    # the run's refinement: refine_passes passes over the keyframes
+    assert mapping.refine_iters(cfg, ms) == 9 and mapping.refine_iters(mapping.MappingConfig(refine_passes=0.5), ms) == 2
+    assert mapping.refine_iters(mapping.MappingConfig(refine_passes=0), ms) == 0
 
 
 def _digest(outs, ms) -> list[bytes]:
@@ -227,5 +230,7 @@ def test_bad_config_values_are_one_line_errors():
         mapping.MappingConfig(drop_beta_ratio=0.5)
     with pytest.raises(ConfigError, match="mapping.init_scale"):
         mapping.MappingConfig(init_scale=0.0)
+    with pytest.raises(ConfigError, match="mapping.refine_passes"):
+        mapping.MappingConfig(refine_passes=-1)
     with pytest.raises(ConfigError, match="mapping.vote_every"):
         mapping.MappingConfig(vote_every=-1)

@@ -43,6 +43,11 @@ def test_runs_write_metrics_at_every_checkpoint_and_a_log(finished):
         for c in r["checkpoints"]:
             assert 0.0 <= c["cr_pct"] <= 100.0 and c["acc_cm"] > 0 and c["psnr_db"] > 0 and c["n_views"] == 4
             assert c["lpips"] is None and "n/a" in f"{c['lpips_note']} n/a"
+        # the 100 % row measures the refined map (3 passes over the keyframes of steps 0 and 3) and keeps the
+        # unrefined one's metrics; the others measure the map as the loop left it
+        assert [c["refine_iters"] for c in r["checkpoints"]] == [0, 0, 0, 6]
+        assert set(r["checkpoints"][-1]["online"]) >= {"acc_cm", "cr_pct", "psnr_db", "n_gaussians"}
+        assert all("online" not in c for c in r["checkpoints"][:-1]) and r["seconds_refine"] > 0
         assert r["coverage"][0][0] == 1 and r["coverage"][-1][0] == 6
         assert r["config"]["sim"]["camera"]["width_px"] == 64
         assert r["config"]["mapping"]["weighted"] is (p == "full")
@@ -60,6 +65,8 @@ def test_log_replays_as_whole_steps(finished):
     reader = LogReader(out / "runs" / "full" / "tiny-00-seed0.mcap")
     assert [s.step for s in reader.steps()] == list(range(6))
     assert reader.metadata["preset"] == "full" and reader.metadata["steps_requested"] == "6"
+    last = json.loads((out / "runs" / "full" / "tiny-00-seed0.json").read_text())["checkpoints"][-1]
+    assert len(reader.refined_map()) == last["n_gaussians"]
 
 
 def test_tables_and_plots_are_written(finished):
@@ -107,6 +114,7 @@ def test_reevaluate_measures_finished_runs_again_from_their_logs(finished, tmp_p
         # the log holds the map of every checkpoint, so the geometry is measured on the very same map
         assert a["map_step"] == a["step"] == b["step"] and a["n_gaussians"] == b["n_gaussians"]
         assert (a["acc_cm"], a["comp_cm"], a["cr_pct"]) == (b["acc_cm"], b["comp_cm"], b["cr_pct"])
+        assert a["refine_iters"] == b["refine_iters"] and a.get("online", {}).get("cr_pct") == b.get("online", {}).get("cr_pct")
         assert a["n_views"] == 3 and b["n_views"] == 4
     (copy / "runs" / "full" / "tiny-00-seed0.mcap").unlink()
     assert bench.main(tiny_args(copy, cache, "full", "--reevaluate")) == 2

@@ -8,6 +8,8 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 from recorder.cli import main
 from replay.source import LogReader
 
@@ -20,13 +22,22 @@ def test_dagsrun_runs_the_loop_and_prints_metrics_and_paths(tmp_path, capsys):
     assert rc == 0
     out = capsys.readouterr().out
     assert "tiny-00: 6 steps in" in out and "Gaussians" in out and "m^2 of floor known" in out
-    assert "map: Acc" in out and "C.R." in out and "PSNR" in out
+    assert "map (after 6 refinement steps): Acc" in out and "C.R." in out and "PSNR" in out
     assert f"log:     {tmp_path / 'run.mcap'}" in out and "summary:" in out
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["steps"] == 6 and summary["config"]["seed"] == 3 and not summary["config"]["mapping"]["weighted"]
     assert summary["map_metrics"]["cr_pct"] >= 0 and summary["last_step_metrics"]["n_gaussians"] > 0
     reader = LogReader(tmp_path / "run.mcap")
     assert len(reader.read_all()) == 6 and reader.end.complete and reader.metadata["preset"] == "baseline"
+    # 3 passes over the keyframes of steps 0 and 3; the refined map is the one the summary measured
+    assert len(reader.refined_map()) == len(reader.read_all()[-1]["/map"]) > 0
+
+
+def test_dagsrun_without_refinement_logs_no_refined_map(tmp_path, capsys):
+    assert main([*SMALL, "mapping.refine_passes=0", "--steps", "4", "--out", str(tmp_path), "--record",
+                 str(tmp_path / "run.mcap")]) == 0
+    assert "map (as the last step left it): Acc" in capsys.readouterr().out
+    assert LogReader(tmp_path / "run.mcap").refined_map() is None
 
 
 def test_dagsrun_bad_input_is_one_line_exit_2(tmp_path, capsys):
@@ -92,3 +103,24 @@ def test_core_package_does_not_import_mcap_rerun_recorder_or_replay():
             "print(sorted(m for m in sys.modules if m.split('.')[0] in ('mcap', 'rerun', 'recorder', 'replay')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
     assert out == "[]", out
+
+
+def test_ctrl_c_during_the_refinement_keeps_every_step_and_no_refined_map(tmp_path, monkeypatch):
+    from dynactivegs import pipeline
+    from recorder import live
+    from recorder.cli import build_config, parser
+
+    cfg = build_config(parser().parse_args([*SMALL]))
+    stop = {"asked": True}                                  # Ctrl-C was pressed: the first Adam step stops it
+    states = pipeline.run(cfg, 4).states
+    with pytest.raises(live._Stop):
+        live._refine(cfg, live._Fanout([], states=states), stop, False)
+
+    def interrupted(*a, **k):
+        raise live._Stop
+    monkeypatch.setattr(pipeline, "refine_map", interrupted)
+    res = live.record_run(cfg, 4, record=tmp_path / "run.mcap", progress=False, handle_sigint=False)
+    assert res.interrupted and res.refine_iters == 0 and res.steps == 4
+    reader = LogReader(tmp_path / "run.mcap")
+    assert [s.step for s in reader.steps()] == [0, 1, 2, 3] and reader.end.complete
+    assert reader.refined_map() is None and reader.end_metadata["interrupted"] == "true"

@@ -260,3 +260,24 @@ def test_every_record_type_goes_through_a_log(tmp_path):
         for topic, rec in step_records(s.step, edge_cases=ec, **SMALL).items():
             assert_identical(rec, s[topic], topic)
             assert s.raw[topic] == encode(rec)
+
+
+def test_the_refined_map_is_read_outside_the_steps_and_a_cut_before_it_loses_only_it(tmp_path):
+    path = tmp_path / "run.mcap"
+    w, written = write_log(path, 3, close=False)
+    assert LogReader(path).refined_map() is None                   # no refinement (yet)
+    refined = {"means": np.arange(12, dtype=np.float32).reshape(4, 3)}
+    with pytest.raises(ValueError, match="end the step"):
+        w.write("/frame", written[0]["/frame"], 1)
+        w.write_refined_map(refined, 1)
+    w._step_topics.clear()
+    w.write_refined_map(refined, written[-1]["/frame"].stamp_ns + 1)
+    w.close()
+    r = LogReader(path)
+    assert [s.step for s in r.steps()] == [0, 1, 2]               # it belongs to no step
+    assert np.array_equal(r.refined_map()["means"], refined["means"])
+    assert np.array_equal(LogReader(path).refined_map()["means"], refined["means"])   # reads through by itself
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(path.read_bytes()[:w.step_end_offsets[-1] + 40])   # killed while writing the refined map
+    r = LogReader(cut)
+    assert [s.step for s in r.steps()] == [0, 1, 2] and r.refined_map() is None
