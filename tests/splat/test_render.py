@@ -194,6 +194,42 @@ def test_fast_backend_is_deterministic_across_thread_counts():
         assert torch.equal(a, b)
 
 
+_DIGEST = """
+import hashlib, torch
+from tests.splat._splat_scenes import random_scene
+from tests.splat.test_render import _render_with_grads
+g, K, T = random_scene(300, 64, 48, torch.Generator().manual_seed(7))
+out, grads = _render_with_grads(g, K, T, 64, 48, "cpu")
+h = hashlib.sha1()
+for t in (out.rgb, out.depth, out.alpha, *grads):
+    h.update(t.detach().numpy().tobytes())
+print(h.hexdigest())
+"""
+
+
+def test_fast_backend_gives_the_same_bits_compiled_for_any_cpu(tmp_path):
+    """Compiled for this CPU and for a generic x86-64 (in fresh processes with their own numba caches), the
+    render and its gradients agree bit for bit, so a run gives the same numbers on another machine."""
+    import os
+    import platform
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    if platform.machine().lower() not in ("x86_64", "amd64"):
+        pytest.skip("compares x86-64 targets")
+    root = Path(__file__).parents[2]
+    digests = []
+    for cpu in ("host", "generic"):
+        env = {**os.environ, "NUMBA_CPU_NAME": cpu, "NUMBA_CACHE_DIR": str(tmp_path / cpu),
+               "PYTHONPATH": os.pathsep.join([str(root), os.environ.get("PYTHONPATH", "")])}
+        out = subprocess.run([sys.executable, "-c", _DIGEST], capture_output=True, text=True, env=env, cwd=root,
+                             timeout=600)
+        assert out.returncode == 0, out.stderr[-2000:]
+        digests.append(out.stdout.strip())
+    assert digests[0] == digests[1]
+
+
 def test_non_finite_gaussians_are_culled_not_drawn():
     gen = torch.Generator().manual_seed(9)
     g, K, T = random_scene(40, 32, 24, gen, adversarial=False)
