@@ -137,6 +137,8 @@ class LiveResult:
     rrd_path: Path | None
     refine_iters: int = 0
     """Adam steps of the offline refinement that ``states`` include (0: the map as the last step left it)."""
+    refine_seconds: float = 0.0
+    """Time of the refinement (``seconds`` is the loop's alone)."""
 
     @property
     def seconds_per_step(self) -> float:
@@ -181,13 +183,16 @@ def record_run(cfg: DagsConfig, steps: int, *, record: Path | None = None, rrd: 
     if handle_sigint:
         signal.signal(signal.SIGINT, on_sigint)
     t0 = time.perf_counter()
+    t_loop = None
     interrupted = False
-    refined = 0
+    refined, refine_seconds = 0, 0.0
     try:
         pipeline.run(cfg, steps, sink=fan, progress=on_progress)
         if bar is not None:
             bar.close()
+        t_loop = time.perf_counter()
         refined = _refine(cfg, fan, stop, progress)
+        refine_seconds = time.perf_counter() - t_loop
         if refined:
             if writer is not None:
                 writer.write_refined_map(fan.states[1].gaussians, fan.last_stamp_ns + 1)
@@ -200,7 +205,7 @@ def record_run(cfg: DagsConfig, steps: int, *, record: Path | None = None, rrd: 
             writer.abort()                          # the file keeps every whole step written so far
         raise
     finally:
-        seconds = time.perf_counter() - t0
+        seconds = (t_loop if t_loop is not None else time.perf_counter()) - t0      # the loop alone
         if handle_sigint:
             signal.signal(signal.SIGINT, previous)
         if bar is not None:
@@ -208,9 +213,11 @@ def record_run(cfg: DagsConfig, steps: int, *, record: Path | None = None, rrd: 
         if rerun is not None:
             rerun.close()
     if writer is not None:
-        writer.close({"interrupted": str(interrupted).lower(), "seconds": f"{seconds:.3f}"})
+        writer.close({"interrupted": str(interrupted).lower(), "seconds": f"{seconds:.3f}",
+                      "refine_seconds": f"{refine_seconds:.3f}"})
     return LiveResult(fan.steps, steps, seconds, interrupted, fan.states or [], np.asarray(fan.trajectory).reshape(-1, 2),
-                      fan.collisions, fan.last_metrics, record, writer.bytes_written if writer else 0, rrd, refined)
+                      fan.collisions, fan.last_metrics, record, writer.bytes_written if writer else 0, rrd, refined,
+                      refine_seconds)
 
 
 def _refine(cfg: DagsConfig, fan: _Fanout, stop: dict[str, bool], progress: bool) -> int:

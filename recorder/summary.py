@@ -33,7 +33,8 @@ def print_summary(cfg: DagsConfig, res: Any, metrics: Any | None, summary_path: 
           f"{int(m.get('n_gaussians', 0))} Gaussians, {m.get('known_area_m2', 0.0):.1f} m^2 of floor known, "
           f"{res.collisions} blocked move{'' if res.collisions == 1 else 's'}")
     if metrics is not None:
-        which = f"after {res.refine_iters} refinement steps" if getattr(res, "refine_iters", 0) else "as the last step left it"
+        which = (f"after {res.refine_iters} refinement steps, {res.refine_seconds:.1f} s" if res.refine_iters
+                 else "as the last step left it")
         print(f"map ({which}): Acc {metrics.acc_cm:.2f} cm, Comp {metrics.comp_cm:.2f} cm, C.R. {metrics.cr_pct:.1f} % "
               f"(<{metrics.cr_threshold_cm:g} cm), PSNR {metrics.psnr_db:.2f} dB on {metrics.n_views} held-out views")
     if res.log_path is not None:

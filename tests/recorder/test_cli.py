@@ -22,7 +22,7 @@ def test_dagsrun_runs_the_loop_and_prints_metrics_and_paths(tmp_path, capsys):
     assert rc == 0
     out = capsys.readouterr().out
     assert "tiny-00: 6 steps in" in out and "Gaussians" in out and "m^2 of floor known" in out
-    assert "map (after 6 refinement steps): Acc" in out and "C.R." in out and "PSNR" in out
+    assert "map (after 6 refinement steps, " in out and " s): Acc" in out and "C.R." in out and "PSNR" in out
     assert f"log:     {tmp_path / 'run.mcap'}" in out and "summary:" in out
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["steps"] == 6 and summary["config"]["seed"] == 3 and not summary["config"]["mapping"]["weighted"]
