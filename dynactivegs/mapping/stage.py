@@ -44,7 +44,7 @@ Per step t (``step``), given frame t, its pose and beta_t from perception:
    (measured on a 600-step run of apartment-02: 50 such Gaussians gave half of the
    reconstruction points more than 20 cm off the surface; a cut-off at 1.5 took Acc there from
    7.2 to 5.1 cm). But a static surface seen for the first time also has a high beta until the
-   map fits it, and a hard cut-off can keep it from ever being fitted: on the 70-step scripted
+   map fits it, and a hard cut-off can keep it from ever being fitted: on a 70-step scripted
    tour it cost 1.4 dB of held-out PSNR.
 5. **Carve** (every step): Gaussians that frame t shows to be in free space go: their centre
    projects onto a pixel with a depth return (and, with weighting on, a confident beta there)

@@ -1,6 +1,6 @@
 """Perception + mapping on a scripted path through an apartment with people walking through the view.
 
-One module-scoped run per setting, 70 steps at the default 160x92: weighting on / off with the
+One module-scoped run per setting, 150 steps at the default 160x92: weighting on / off with the
 free-space vote off (the weighting alone), and weighting off with the vote on. The numbers are
 in the assertion messages.
 """
@@ -14,7 +14,7 @@ from dynactivegs.eval.scripted_tour import run_tour
 from dynactivegs.mapping.stage import MappingConfig
 from dynactivegs.perception.stage import PerceptionConfig
 
-STEPS, WARMUP = 70, 30
+STEPS, WARMUP = 150, 30
 
 
 @pytest.fixture(scope="module")
