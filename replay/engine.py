@@ -16,6 +16,10 @@ planning are cheap to fast-forward (a few ms per step), and perception and mappi
 space than re-running them does time. Selection's state also holds a networkx graph,
 which has no place in a versioned message schema.
 
+A replay through the log's last step with mapping re-run also re-runs the offline
+refinement that follows it (``mapping.refine_passes``) when the log holds its map
+(``/map_refined``), and compares the two maps parameter by parameter.
+
 Without overrides every re-run output is compared with the log field by field, exactly
 (the stages are deterministic on one machine, DESIGN.md §3); the first difference is
 reported as ``step K, topic /x, field f, max abs diff d``. With overrides the run is a
@@ -39,7 +43,7 @@ from dynactivegs.config import DagsConfig, config_from_json, with_overrides
 from dynactivegs.errors import DagsError
 from dynactivegs.records import MappingOut, StepRecord
 from recorder.live import DEFAULT_MAP_EVERY, known_area_m2, occupancy_of, wants_map
-from recorder.mcap_log import MAP_TOPIC, STAGE_TOPICS
+from recorder.mcap_log import MAP_TOPIC, REFINED_MAP_TOPIC, STAGE_TOPICS
 from replay.source import LogEnd, LoggedStep, LogReader
 
 
@@ -109,6 +113,7 @@ class WhatIf:
     path_m: list[tuple[float, float]] = field(default_factory=list)  # (logged, replayed) path lengths
     n_gaussians: tuple[int, int] | None = None                        # (logged, replayed) at the last step
     compared_topics: tuple[str, ...] = ()                             # the re-run stages' topics
+    refined_gaussians: tuple[int, int] | None = None                  # (logged, replayed) after the refinement
 
     def add(self, step: int, replayed: StepRecord, logged: LoggedStep, topics: list[str]) -> None:
         self.steps += 1
@@ -145,6 +150,9 @@ class WhatIf:
             out.append(f"actions differ at {self.action_differs} of {self.steps} steps")
         if self.n_gaussians is not None:
             out.append(f"Gaussians at the last step: {self.n_gaussians[0]} logged, {self.n_gaussians[1]} replayed")
+        if self.refined_gaussians is not None:
+            out.append(f"Gaussians after the refinement: {self.refined_gaussians[0]} logged, "
+                       f"{self.refined_gaussians[1]} replayed")
         return out
 
 
@@ -173,6 +181,7 @@ class ReplayResult:
     first_difference: Difference | None
     whatif: WhatIf | None
     end: LogEnd | None
+    refined_checked: bool = False      # the refinement was re-run and its map matched the log's /map_refined
 
     @property
     def exit_code(self) -> int:
@@ -233,6 +242,7 @@ def replay(path: str | Path, *, from_stage: str = "perception", from_step: int =
     prev_replayed: MappingOut | None = None
     steps_run = compared = 0
     first_diff: Difference | None = None
+    refined_checked = False
     bar = None
     if progress:
         from tqdm import tqdm
@@ -274,6 +284,9 @@ def replay(path: str | Path, *, from_stage: str = "perception", from_step: int =
                         break
                 if first_diff is not None:
                     break
+        if first_diff is None and compared and _reached_end(reader, to_step):
+            first_diff, refined_checked = _replay_refinement(cfg, reader, states, first_stage, whatif, writer,
+                                                             ls.stamp_ns, ls.step, progress)
     finally:
         if bar is not None:
             bar.close()
@@ -285,9 +298,65 @@ def replay(path: str | Path, *, from_stage: str = "perception", from_step: int =
         last = "no whole step" if reader.end is None or reader.end.last_step is None else \
             f"steps 0..{reader.end.last_step}"
         raise DagsError(f"nothing to replay: log {reader.path} has {last}, --from-step is {from_step}")
-    res = ReplayResult(cfg, from_stage, steps_run, compared, first_diff, whatif, reader.end)
+    res = ReplayResult(cfg, from_stage, steps_run, compared, first_diff, whatif, reader.end, refined_checked)
     _report(res, reader, from_step, overrides, logged_cfg, say, record, rrd)
     return res
+
+
+def _reached_end(reader: LogReader, to_step: int | None) -> bool:
+    """Whether the replay ran through the log's last whole step (the refined map comes after it)."""
+    end = reader.end
+    return end is not None and end.last_step is not None and (to_step is None or to_step >= end.last_step)
+
+
+def _replay_refinement(cfg: DagsConfig, reader: LogReader, states: list[object], first_stage: int,
+                       whatif: WhatIf | None, writer: Any, last_stamp_ns: int,
+                       last_step: int, progress: bool) -> tuple[Difference | None, bool]:
+    """The offline refinement after the last step, when the log has its map (``/map_refined``).
+
+    With mapping re-run, the refinement is re-run from the replayed map and keyframes and its
+    map compared with the logged one, parameter by parameter (or, in a what-if run, its size
+    reported); with mapping taken from the log, the logged refined map is copied to a new log.
+    Returns the first difference and whether the refined maps were compared and matched.
+    """
+    logged = reader.refined_map()
+    if logged is None:
+        return None, False
+    if first_stage > 1:
+        if writer is not None:
+            writer.write_refined_map(logged, last_stamp_ns + 1)
+        return None, False
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        from dynactivegs.mapping.stage import refine_iters
+
+        bar = tqdm(total=refine_iters(cfg.mapping, states[1]), desc="replay refinement", unit="it",
+                   dynamic_ncols=True)
+    try:
+        replayed = pipeline.refine_map(cfg, states, None if bar is None else lambda _k: bar.update(1))[1].gaussians
+    finally:
+        if bar is not None:
+            bar.close()
+    if writer is not None:
+        writer.write_refined_map(replayed, last_stamp_ns + 1)
+    if whatif is not None:
+        whatif.refined_gaussians = (len(logged), len(replayed))
+        return None, False
+    for name, a, b in zip(("means", "log_scales", "quats", "opacity_logits", "sh0"), replayed.tensors(),
+                          logged.tensors()):
+        d = compare_records(_Param(a.detach().cpu().numpy()), _Param(b.detach().cpu().numpy()))
+        if d is not None:
+            return Difference(last_step, REFINED_MAP_TOPIC, name, d[1]), False
+    return None, True
+
+
+@dataclass(frozen=True)
+class _Param:
+    """One parameter tensor of a map, as a record :func:`compare_records` takes."""
+
+    value: np.ndarray
 
 
 def _write_step(writer: Any, ls: LoggedStep, out: StepRecord, states: list[object], timings: dict[str, float],
@@ -333,6 +402,8 @@ def _report(res: ReplayResult, reader: LogReader, from_step: int, overrides: lis
         say(f"replay of {res.from_stage} and after differs from the log at {res.first_difference.describe()}")
     else:
         topics = ", ".join(STAGE_TOPICS[s.name] for s in pipeline.STAGES[pipeline.stage_index(res.from_stage):])
+        if res.refined_checked:
+            topics += f" and {REFINED_MAP_TOPIC} (the refinement re-run after step {last})"
         say(f"replayed {res.from_stage} and after on {span}: {topics} identical to the log")
     if end is not None and not end.complete:
         say(f"note: {end.describe()}; its {end.steps} whole steps were read")

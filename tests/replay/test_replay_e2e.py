@@ -53,6 +53,42 @@ def test_replay_from_each_stage_is_identical(recorded, capsys, stage):
     rc, out, err = replay(capsys, recorded["log"], "--from-stage", stage)
     assert rc == 0, out + err
     assert f"replayed {stage} and after on steps 0..{STEPS - 1}" in out and "identical to the log" in out
+    refined = f"/map_refined (the refinement re-run after step {STEPS - 1})" in out
+    assert refined == (stage in ("perception", "mapping")), out
+
+
+def test_log_holds_the_refined_map_after_its_last_step(recorded):
+    reader = LogReader(recorded["log"])
+    last = reader.read_all()[-1]
+    refined = reader.refined_map()
+    assert refined is not None and len(refined) > 0
+    assert not all(np.array_equal(a.numpy(), b.numpy()) for a, b in zip(refined.tensors(), last["/map"].tensors()))
+
+
+def test_tampered_refined_map_fails_naming_the_parameter(recorded, capsys, tmp_path):
+    reader = LogReader(recorded["log"])
+    bad = tmp_path / "tampered_refined.mcap"
+    with LogWriter(bad, reader.metadata) as w:
+        for ls in reader.steps():
+            for topic in sorted(t for t in ls.raw if t != "/step_end"):
+                w.write_raw(topic, "x", ls.raw[topic], ls.stamp_ns)
+            w.end_step(ls.step, ls.stamp_ns)
+        g = reader.refined_map()
+        g.sh0[3, 1] += 0.25
+        w.write_refined_map(g, ls.stamp_ns + 1)
+    rc, out, err = replay(capsys, bad, "--from-stage", "mapping")
+    assert rc == 1, out + err
+    assert f"step {STEPS - 1}, topic /map_refined, field sh0, max abs diff 0.25" in out, out
+    rc, out, err = replay(capsys, bad, "--from-stage", "mapping", "--to-step", str(STEPS - 2))
+    assert rc == 0, out + err                  # a replay that stops before the last step does not refine
+
+
+def test_what_if_refinement_reports_its_map_size(recorded, capsys):
+    rc, out, err = replay(capsys, recorded["log"], "--from-stage", "mapping", "--set", "mapping.refine_passes=0")
+    assert rc == 0, out + err
+    n_last = LogReader(recorded["log"]).read_all()[-1]["/mapping"].n_gaussians
+    assert f"Gaussians after the refinement: {len(LogReader(recorded['log']).refined_map())} logged, {n_last} " \
+           "replayed" in out, out
 
 
 def test_replay_from_a_later_step_fast_forwards(recorded, capsys):
@@ -123,8 +159,10 @@ def test_replayed_run_can_be_recorded_and_viewed(recorded, capsys, tmp_path):
     rc, out, err = replay(capsys, recorded["log"], "--from-stage", "fields", "--record", tmp_path / "re.mcap",
                           "--rrd", tmp_path / "re.rrd")
     assert rc == 0, out + err
+    assert LogReader(tmp_path / "re.mcap").refined_map() is not None      # copied from the log it replayed
     rc, out, err = replay(capsys, tmp_path / "re.mcap")
     assert rc == 0, out + err
+    assert "/map_refined (the refinement re-run" in out, out
     verify = subprocess.run([shutil.which("rerun") or "rerun", "rrd", "verify", str(tmp_path / "re.rrd")],
                             capture_output=True, text=True)
     assert verify.returncode == 0, verify.stderr
