@@ -277,6 +277,10 @@ class LogWriter:
         if self._step_topics:
             raise ValueError("end the step in progress before writing the refined map")
         self.write_raw(REFINED_MAP_TOPIC, "state", encode_state(gaussians), stamp_ns)
+        self._flush_chunk()
+
+    def _flush_chunk(self) -> None:
+        """Close the open chunk and write it to disk (fsync'ed if asked); a cut after this keeps it."""
 
         def flush() -> None:
             self._mcap.flush()
@@ -294,16 +298,8 @@ class LogWriter:
     def end_step(self, step: int, stamp_ns: int) -> None:
         """Close step ``step``: write ``/step_end``, then its chunk to disk (fsync'ed if asked)."""
         self.write("/step_end", StepEnd(step, stamp_ns, len(self._step_topics)), stamp_ns)
-
-        def flush() -> None:
-            self._mcap.flush()
-            if self._fsync:
-                self._file.fsync()
-
-        self._io(flush)
-        self._good_offset = self._file.tell()
+        self._flush_chunk()
         self.step_end_offsets.append(self._good_offset)
-        self._step_topics.clear()
         self.steps_written += 1
         self.last_step = step
 
