@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import signal
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -230,24 +231,38 @@ def _refine(cfg: DagsConfig, fan: _Fanout, stop: dict[str, bool], progress: bool
     iters = refine_iters(cfg.mapping, fan.states[1])
     if iters == 0:
         return 0
+
+    def check() -> None:
+        if stop["asked"]:
+            raise _Stop
+
+    fan.states = refine_with_bar(cfg, fan.states, desc="refine", progress=progress, after_iter=check)
+    return iters
+
+
+def refine_with_bar(cfg: DagsConfig, states: list[object], *, desc: str, progress: bool,
+                    after_iter: Callable[[], None] | None = None) -> list[object]:
+    """:func:`dynactivegs.pipeline.refine_map` with a progress bar of its Adam steps when ``progress``;
+    ``after_iter()`` runs after every step (it may raise to stop the refinement)."""
+    from dynactivegs.mapping.stage import refine_iters
+
     bar = None
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=iters, desc="refine", unit="it", dynamic_ncols=True)
+        bar = tqdm(total=refine_iters(cfg.mapping, states[1]), desc=desc, unit="it", dynamic_ncols=True)
 
     def on_iter(k: int) -> None:
         if bar is not None:
             bar.update(1)
-        if stop["asked"]:
-            raise _Stop
+        if after_iter is not None:
+            after_iter()
 
     try:
-        fan.states = pipeline.refine_map(cfg, fan.states, on_iter)
+        return pipeline.refine_map(cfg, states, on_iter)
     finally:
         if bar is not None:
             bar.close()
-    return iters
 
 
 def _bar(total: int, scene: str) -> Any:

@@ -42,7 +42,7 @@ from dynactivegs import pipeline
 from dynactivegs.config import DagsConfig, config_from_json, with_overrides
 from dynactivegs.errors import DagsError
 from dynactivegs.records import MappingOut, StepRecord
-from recorder.live import DEFAULT_MAP_EVERY, known_area_m2, occupancy_of, wants_map
+from recorder.live import DEFAULT_MAP_EVERY, known_area_m2, occupancy_of, refine_with_bar, wants_map
 from recorder.mcap_log import MAP_TOPIC, REFINED_MAP_TOPIC, STAGE_TOPICS
 from replay.source import LogEnd, LoggedStep, LogReader
 
@@ -326,29 +326,17 @@ def _replay_refinement(cfg: DagsConfig, reader: LogReader, states: list[object],
         if writer is not None:
             writer.write_refined_map(logged, last_stamp_ns + 1)
         return None, False
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        from dynactivegs.mapping.stage import refine_iters
-
-        bar = tqdm(total=refine_iters(cfg.mapping, states[1]), desc="replay refinement", unit="it",
-                   dynamic_ncols=True)
-    try:
-        replayed = pipeline.refine_map(cfg, states, None if bar is None else lambda _k: bar.update(1))[1].gaussians
-    finally:
-        if bar is not None:
-            bar.close()
+    replayed = refine_with_bar(cfg, states, desc="replay refinement", progress=progress)[1].gaussians
     if writer is not None:
         writer.write_refined_map(replayed, last_stamp_ns + 1)
     if whatif is not None:
         whatif.refined_gaussians = (len(logged), len(replayed))
         return None, False
-    for name, a, b in zip(("means", "log_scales", "quats", "opacity_logits", "sh0"), replayed.tensors(),
-                          logged.tensors()):
-        d = compare_records(_Param(a.detach().cpu().numpy()), _Param(b.detach().cpu().numpy()))
+    for f in dataclasses.fields(replayed):
+        a, b = (_Param(getattr(g, f.name).detach().cpu().numpy()) for g in (replayed, logged))
+        d = compare_records(a, b)
         if d is not None:
-            return Difference(last_step, REFINED_MAP_TOPIC, name, d[1]), False
+            return Difference(last_step, REFINED_MAP_TOPIC, f.name, d[1]), False
     return None, True
 
 

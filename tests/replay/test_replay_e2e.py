@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import shutil
 import subprocess
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,7 @@ from dynactivegs.pipeline import STAGE_NAMES
 from recorder.cli import main as dagsrun
 from recorder.mcap_log import LogWriter
 from replay.cli import main as dagsreplay
-from replay.source import LogReader
+from replay.source import LoggedStep, LogReader
 
 STEPS = 8
 SMALL = ["--scene", "tiny-00", "--steps", str(STEPS), "--no-eval", "--no-progress",
@@ -69,13 +70,10 @@ def test_tampered_refined_map_fails_naming_the_parameter(recorded, capsys, tmp_p
     reader = LogReader(recorded["log"])
     bad = tmp_path / "tampered_refined.mcap"
     with LogWriter(bad, reader.metadata) as w:
-        for ls in reader.steps():
-            for topic in sorted(t for t in ls.raw if t != "/step_end"):
-                w.write_raw(topic, "x", ls.raw[topic], ls.stamp_ns)
-            w.end_step(ls.step, ls.stamp_ns)
+        last_stamp = _copy_steps(reader, w)
         g = reader.refined_map()
         g.sh0[3, 1] += 0.25
-        w.write_refined_map(g, ls.stamp_ns + 1)
+        w.write_refined_map(g, last_stamp + 1)
     rc, out, err = replay(capsys, bad, "--from-stage", "mapping")
     assert rc == 1, out + err
     assert f"step {STEPS - 1}, topic /map_refined, field sh0, max abs diff 0.25" in out, out
@@ -86,9 +84,9 @@ def test_tampered_refined_map_fails_naming_the_parameter(recorded, capsys, tmp_p
 def test_what_if_refinement_reports_its_map_size(recorded, capsys):
     rc, out, err = replay(capsys, recorded["log"], "--from-stage", "mapping", "--set", "mapping.refine_passes=0")
     assert rc == 0, out + err
-    n_last = LogReader(recorded["log"]).read_all()[-1]["/mapping"].n_gaussians
-    assert f"Gaussians after the refinement: {len(LogReader(recorded['log']).refined_map())} logged, {n_last} " \
-           "replayed" in out, out
+    reader = LogReader(recorded["log"])
+    n_last = reader.read_all()[-1]["/mapping"].n_gaussians
+    assert f"Gaussians after the refinement: {len(reader.refined_map())} logged, {n_last} replayed" in out, out
 
 
 def test_replay_from_a_later_step_fast_forwards(recorded, capsys):
@@ -127,22 +125,33 @@ def test_what_if_motion_weight_reports_path_lengths(recorded, capsys):
     assert "planning.path.motion_weight=0 (was" in out and "planned path length" in out
 
 
+def _copy_steps(reader: LogReader, w: LogWriter, edit: Callable[[LoggedStep, str], bool] | None = None) -> int:
+    """Copy every step of ``reader`` to ``w``; ``edit(step, topic)`` may write a message itself (returns True)
+    instead of the copy. Returns the last step's stamp."""
+    for ls in reader.steps():
+        for topic in sorted(t for t in ls.raw if t != "/step_end"):
+            if edit is None or not edit(ls, topic):
+                w.write_raw(topic, "x", ls.raw[topic], ls.stamp_ns)
+        w.end_step(ls.step, ls.stamp_ns)
+    return ls.stamp_ns
+
+
 def _tamper(src: Path, dst: Path, step: int) -> int:
     """Copy the log, changing the action of ``step``'s /planning; returns the new action."""
     reader = LogReader(src)
     new_action = None
+
+    def edit(ls: LoggedStep, topic: str) -> bool:
+        nonlocal new_action
+        if topic != "/planning" or ls.step != step:
+            return False
+        p = ls[topic]
+        new_action = (p.action + 1) % 4
+        w.write(topic, dataclasses.replace(p, action=new_action), ls.stamp_ns)
+        return True
+
     with LogWriter(dst, reader.metadata) as w:
-        for ls in reader.steps():
-            for topic in sorted(ls.raw):
-                if topic == "/step_end":
-                    continue
-                if topic == "/planning" and ls.step == step:
-                    p = ls[topic]
-                    new_action = (p.action + 1) % 4
-                    w.write(topic, dataclasses.replace(p, action=new_action), ls.stamp_ns)
-                else:
-                    w.write_raw(topic, "x", ls.raw[topic], ls.stamp_ns)
-            w.end_step(ls.step, ls.stamp_ns)
+        _copy_steps(reader, w, edit)
     return new_action
 
 
