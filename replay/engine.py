@@ -67,25 +67,24 @@ def compare_records(replayed: object, logged: object) -> tuple[str, str] | None:
     """
     assert type(replayed) is type(logged), (type(replayed), type(logged))
     for f in dataclasses.fields(replayed):
-        a, b = getattr(replayed, f.name), getattr(logged, f.name)
-        if isinstance(a, np.ndarray):
-            if a.dtype != b.dtype or a.shape != b.shape:
-                return f.name, f"{b.dtype} {b.shape} logged, {a.dtype} {a.shape} replayed"
-            if a.dtype.kind == "f":
-                same = np.array_equal(a, b, equal_nan=True)
-            else:
-                same = np.array_equal(a, b)
-            if not same:
-                return f.name, f"max abs diff {_max_abs_diff(a, b):.6g}"
-        elif isinstance(a, float):
-            if not (a == b or (math.isnan(a) and math.isnan(b))):
-                return f.name, f"max abs diff {abs(a - b):.6g}"
-        elif isinstance(a, (bool, int)):
-            if a != b:
-                return f.name, f"max abs diff {abs(int(a) - int(b))}"
-        elif a != b:
-            return f.name, f"{b!r} logged, {a!r} replayed"
+        detail = compare_values(getattr(replayed, f.name), getattr(logged, f.name))
+        if detail is not None:
+            return f.name, detail
     return None
+
+
+def compare_values(a: object, b: object) -> str | None:
+    """How a replayed value ``a`` differs from the logged ``b`` (see :func:`compare_records`); None when identical."""
+    if isinstance(a, np.ndarray):
+        if a.dtype != b.dtype or a.shape != b.shape:
+            return f"{b.dtype} {b.shape} logged, {a.dtype} {a.shape} replayed"
+        same = np.array_equal(a, b, equal_nan=True) if a.dtype.kind == "f" else np.array_equal(a, b)
+        return None if same else f"max abs diff {_max_abs_diff(a, b):.6g}"
+    if isinstance(a, float):
+        return None if (a == b or (math.isnan(a) and math.isnan(b))) else f"max abs diff {abs(a - b):.6g}"
+    if isinstance(a, (bool, int)):
+        return None if a == b else f"max abs diff {abs(int(a) - int(b))}"
+    return None if a == b else f"{b!r} logged, {a!r} replayed"
 
 
 def _max_abs_diff(a: np.ndarray, b: np.ndarray) -> float:
@@ -333,19 +332,11 @@ def _replay_refinement(cfg: DagsConfig, reader: LogReader, states: list[object],
         whatif.refined_gaussians = (len(logged), len(replayed))
         return None, False
     for f in dataclasses.fields(replayed):
-        a, b = (_Param(getattr(g, f.name).detach().cpu().numpy()) for g in (replayed, logged))
-        d = compare_records(a, b)
-        if d is not None:
-            return Difference(last_step, REFINED_MAP_TOPIC, f.name, d[1]), False
+        a, b = (getattr(g, f.name).detach().cpu().numpy() for g in (replayed, logged))
+        detail = compare_values(a, b)
+        if detail is not None:
+            return Difference(last_step, REFINED_MAP_TOPIC, f.name, detail), False
     return None, True
-
-
-@dataclass(frozen=True)
-class _Param:
-    """One parameter tensor of a map, as a record :func:`compare_records` takes."""
-
-    value: np.ndarray
-
 
 def _write_step(writer: Any, ls: LoggedStep, out: StepRecord, states: list[object], timings: dict[str, float],
                 first_stage: int) -> None:
