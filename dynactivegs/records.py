@@ -210,6 +210,7 @@ class SelectionOut:
     edge_length_m: np.ndarray     # float64 (E,)
     node_region: np.ndarray       # int32 (N,), subregion label per node
     frontier: np.ndarray          # bool (N,), node next to unknown space
+    node_leg_clear: np.ndarray    # bool (N,), the straight way from the robot to the node keeps clear of obstacles
     cand_node: np.ndarray         # int32 (C,), candidate views: node and yaw
     cand_yaw_rad: np.ndarray      # float64 (C,)
     cand_gain: np.ndarray         # float64 (C,), I_s (eq. 8)
@@ -221,8 +222,8 @@ class SelectionOut:
         n = self.node_xy_m.shape[0]
         c = self.cand_node.shape[0]
         _check(self.target_xy_m.shape == (2,), "SelectionOut.target_xy_m must be (2,)")
-        _check(self.node_xy_m.shape == (n, 2) and self.node_region.shape == (n,) and self.frontier.shape == (n,),
-               "SelectionOut node arrays must be (N, ...)")
+        _check(self.node_xy_m.shape == (n, 2) and self.node_region.shape == (n,) and self.frontier.shape == (n,)
+               and self.node_leg_clear.shape == (n,), "SelectionOut node arrays must be (N, ...)")
         _check(self.edges.ndim == 2 and self.edges.shape[1] == 2 and self.edge_length_m.shape == (self.edges.shape[0],),
                "SelectionOut.edges must be (E, 2) with edge_length_m (E,)")
         _check(all(a.shape == (c,) for a in (self.cand_yaw_rad, self.cand_gain, self.cand_risk, self.cand_cost,

@@ -13,10 +13,11 @@ Per step:
    (length only), ``dyn_edge`` (current U_m), ``dyn_edge_temporal`` (the eq. 13 average).
    Edges passing within ``block_radius_m`` of a place where the robot was recently blocked
    cost ``block_penalty_m`` more.
-3. The path is re-planned (Dijkstra from the target node; the path starts at the node near
-   the robot with the cheapest way there counting the turns, :func:`_source`, and ends at the
-   target position) when the target or graph changed, the robot was blocked, or
-   ``replan_every`` steps passed; otherwise the robot keeps following the stored path.
+3. The path is re-planned (Dijkstra from the target node; the path starts at a node near the
+   robot that it can drive to straight, the one with the cheapest way there counting the turns,
+   :func:`_source`, and ends at the target position) when the target or graph changed, the robot
+   was blocked, or ``replan_every`` steps passed; otherwise the robot keeps following the stored
+   path.
 4. The next discrete action (:func:`dynactivegs.planning.actions.next_action`): turn toward
    the next waypoint, forward when aligned, final turn to the target yaw, STOP at the target.
 5. Local collision check: a forward move that the current depth frame says would hit
@@ -167,18 +168,20 @@ def _source(cfg: PlanningConfig, sel: SelectionOut, arrays: GraphArrays, to_targ
             robot_xy: np.ndarray, robot_yaw: float) -> int:
     """The node the path starts at (-1: the target is unreachable from near the robot).
 
-    Candidates: the nearest node, and the nodes within ``source_radius_m`` of the robot at most three
-    graph hops from it (a node that close and more hops away could lie behind a wall). Each costs the
-    straight way to it, the turns (toward it, then onto its next edge; a turn step is worth one
-    forward step) and its eq. (11) cost to the target."""
+    Candidates: the nearest node the robot can drive to straight (``SelectionOut.node_leg_clear``;
+    the nearest of all when there is none), and the nodes within ``source_radius_m`` of the robot
+    at most three graph hops from it (a node that close and more hops away could lie behind a
+    wall) with a clear way too. Each costs the straight way to it, the turns (toward it, then onto
+    its next edge; a turn step is worth one forward step) and its eq. (11) cost to the target."""
     d = np.hypot(*(sel.node_xy_m - robot_xy).T)
-    near = int(np.argmin(d))
+    clear = sel.node_leg_clear
+    near = int(np.argmin(np.where(clear, d, np.inf))) if clear.any() else int(np.argmin(d))
     cand = {near}
     if cfg.source_radius_m > 0.0:
         ring = {near}
         for _ in range(3):
             ring = {int(w) for a in ring for w in np.concatenate([arrays.v[arrays.u == a], arrays.u[arrays.v == a]])}
-            cand |= {w for w in ring if d[w] <= cfg.source_radius_m}
+            cand |= {w for w in ring if d[w] <= cfg.source_radius_m and clear[w]}
     acfg = cfg.actions
     per_rad = acfg.forward_step_m / math.radians(acfg.turn_step_deg)
     best, best_cost = -1, math.inf
@@ -226,8 +229,9 @@ def _plan(cfg: PlanningConfig, sel: SelectionOut, now_map: FloorMap | None, ema_
     while nodes[-1] != int(sel.target_node):
         nodes.append(int(pred[nodes[-1]]))
     wp = sel.node_xy_m[nodes]
-    # start from the second node when the robot is already between the first two
-    if len(wp) >= 2 and np.hypot(*(robot_xy - wp[1])) <= np.hypot(*(wp[0] - wp[1])):
+    # start from the second node when the robot is already between the first two and can drive to it straight
+    if (len(nodes) >= 2 and sel.node_leg_clear[nodes[1]]
+            and np.hypot(*(robot_xy - wp[1])) <= np.hypot(*(wp[0] - wp[1]))):
         wp = wp[1:]
     if np.hypot(*(wp[-1] - sel.target_xy_m)) > 1e-6:
         wp = np.concatenate([wp, sel.target_xy_m[None]])

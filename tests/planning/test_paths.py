@@ -195,12 +195,31 @@ def test_the_path_starts_at_the_node_ahead_not_at_the_nearest_one_behind():
 
     class Sel:
         node_xy_m = xy
+        node_leg_clear = np.ones(len(xy), bool)
     robot = np.array([0.35, 0.15])                                # nearest is node 1 (0.21 m), behind and to the right
     cfg = planning.PlanningConfig()
     assert planning._source(cfg, Sel, arrays, to_target, pred, robot, 0.0) == 2                 # facing +x: ahead
     assert planning._source(planning.PlanningConfig(source_radius_m=0.0), Sel, arrays, to_target, pred, robot, 0.0) == 1
     to_start, pred0 = dijkstra(arrays, arrays.length_m, 0)        # the target at the other end, behind the robot
     assert planning._source(cfg, Sel, arrays, to_start, pred0, robot, math.pi) == 0
+
+
+def test_the_path_never_starts_at_a_node_the_robot_cannot_drive_to_straight():
+    xy, arrays = chain_graph(with_pair=False)
+    to_target, pred = dijkstra(arrays, arrays.length_m, 6)
+    clear = np.ones(len(xy), bool)
+    clear[2] = False                                              # say a low box stands between the robot and node 2
+
+    class Sel:
+        node_xy_m = xy
+        node_leg_clear = clear
+    robot = np.array([0.35, 0.15])
+    cfg = planning.PlanningConfig()
+    assert planning._source(cfg, Sel, arrays, to_target, pred, robot, 0.0) == 1           # node 2 wins when clear
+    clear[:3] = False                                             # nothing within source_radius_m is clear ...
+    assert planning._source(cfg, Sel, arrays, to_target, pred, robot, 0.0) == 3           # ... the nearest clear one
+    clear[:] = False                                              # no node clear: the nearest of all, as before
+    assert planning._source(cfg, Sel, arrays, to_target, pred, robot, 0.0) == 1
 
 
 def test_a_robot_on_a_cut_off_piece_of_the_graph_has_no_path():
@@ -211,5 +230,6 @@ def test_a_robot_on_a_cut_off_piece_of_the_graph_has_no_path():
 
     class Sel:
         node_xy_m = xy
+        node_leg_clear = np.ones(len(xy), bool)
     robot = np.array([1.05, 0.5])                                 # nearest is node 7, on the pair
     assert planning._source(planning.PlanningConfig(), Sel, arrays, to_target, pred, robot, 0.0) == -1

@@ -85,7 +85,7 @@ def step_records(step: int, *, seed: int = 0, w: int = 160, h: int = 92, grid: t
     selection = records.SelectionOut(nodes[7].copy(), 0.5, 7, "local", nodes, edges,
                                      np.linalg.norm(nodes[edges[:, 0]] - nodes[edges[:, 1]], axis=1),
                                      (np.arange(n_nodes) // 25).astype(np.int32), rng.random(n_nodes) < 0.1,
-                                     cand_node, rng.uniform(-np.pi, np.pi, n_cand), gain, risk, cost,
+                                     rng.random(n_nodes) < 0.9, cand_node, rng.uniform(-np.pi, np.pi, n_cand), gain, risk, cost,
                                      gain - 0.5 * risk - 0.1 * cost)
     path = np.linspace([x, y], nodes[7], 12)
     planning = records.PlanningOut(step % 3, path, float(rng.random() * 10), step % 4 == 0, False, False)
@@ -103,7 +103,8 @@ def step_records(step: int, *, seed: int = 0, w: int = 160, h: int = 92, grid: t
         planning = records.PlanningOut(3, np.zeros((0, 2)), float("nan"), True, True, True)
         selection = records.SelectionOut(np.array([np.nan, np.nan]), float("nan"), -1, "none",
                                          np.zeros((0, 2)), np.zeros((0, 2), np.int32), np.zeros(0), np.zeros(0, np.int32),
-                                         np.zeros(0, bool), np.zeros(0, np.int32), np.zeros(0), np.zeros(0), np.zeros(0),
+                                         np.zeros(0, bool), np.zeros(0, bool), np.zeros(0, np.int32), np.zeros(0),
+                                         np.zeros(0), np.zeros(0),
                                          np.zeros(0), np.zeros(0))
         truth = records.SimTruth(step, stamp_ns, mask, truth.robot, np.zeros((0, 2)), np.zeros(0), np.zeros(0), False)
         metrics = Metrics(step, {"nan": float("nan"), "payload": float(nan_payload[0]), "neg0": -0.0})

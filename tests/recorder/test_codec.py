@@ -233,3 +233,16 @@ def test_tensors_move_to_the_requested_device():
     m["value"]["items"][0]["device"] = "nosuchdevice"
     with pytest.raises(DagsError, match="cannot place a tensor"):
         decode_state(msgpack.packb(m))
+
+
+def test_a_selection_of_schema_version_3_reads_with_every_way_clear():
+    sel = next(r for r in all_record_types() if type(r).__name__ == "SelectionOut")
+    m = msgpack.unpackb(encode(sel))
+    m.pop("node_leg_clear")
+    m["_v"] = 3
+    old = decode(msgpack.packb(m))
+    assert old.node_leg_clear.dtype == np.bool_ and old.node_leg_clear.all()
+    assert old.node_leg_clear.shape == (len(sel.node_xy_m),) and np.array_equal(old.node_xy_m, sel.node_xy_m)
+    m["_v"] = 4                                       # the current version must have it
+    with pytest.raises(DagsError, match="missing \\['node_leg_clear'\\]"):
+        decode(msgpack.packb(m))

@@ -142,7 +142,8 @@ def _selection_out_from_graph(G, target_xy) -> SelectionOut:
     t = nearest_node(G, np.asarray(target_xy))
     z = np.zeros(0)
     return SelectionOut(node_xy(G)[t].copy(), 0.0, t, "local", node_xy(G), np.stack([a.u, a.v], 1).astype(np.int32),
-                        a.length_m.copy(), np.zeros(n, np.int32), np.zeros(n, bool), np.zeros(0, np.int32), z, z, z, z, z)
+                        a.length_m.copy(), np.zeros(n, np.int32), np.zeros(n, bool), np.ones(n, bool), np.zeros(0, np.int32),
+                        z, z, z, z, z)
 
 
 def test_dyn_edge_planner_detours_around_a_busy_corridor_that_shortest_goes_through():
@@ -359,7 +360,7 @@ def test_standing_still_before_something_moving_is_a_wait_not_a_bump():
     target = selection.Target((1.5, 1.5), math.pi, "local", 0)
     pose = (4.5, 1.5, math.pi)
     state = state_on(cfg, free, target, pose)
-    ahead = np.array([4.4, 1.5])                            # in the bump disc, between the robot and the box
+    ahead = np.array([4.5 - 0.18 - 0.25, 1.5])              # the bump disc's centre, just beyond the robot's footprint
     # a person-sized box 0.3 m ahead of the camera
     depth, which = render_depth(view(*pose), K, W, H, (9.0, 3.0), [(4.05, 1.3, 4.2, 1.7, 1.8)])
     frame = Frame(1, 1, np.zeros((H, W, 3), np.uint8), depth, K.copy(), view(*pose))
@@ -434,7 +435,7 @@ def test_space_beyond_the_fields_grid_counts_as_unobserved():
 def test_a_target_is_given_up_after_bump_give_up_bumps_on_the_way():
     free = three_rooms()
     fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0)], [])
-    pose = (4.5, 1.5, math.pi)
+    pose = (5.0, 1.5, math.pi)                              # the bump disc leaves room to pass it in C
     target = selection.Target((1.5, 1.5), math.pi, "local", 0)
 
     def bumps_until_given_up(give_up: int, steps: int = 6) -> int | None:
@@ -450,3 +451,49 @@ def test_a_target_is_given_up_after_bump_give_up_bumps_on_the_way():
 
     assert bumps_until_given_up(3) == 3
     assert bumps_until_given_up(0) is None                  # only the stuck rule (40 steps)
+
+
+def test_a_way_straight_across_an_obstacle_is_not_clear():
+    cfg = selection.SelectionConfig()
+    occupied = np.zeros((60, 80), bool)
+    fill(occupied, 1.5, 1.0, 2.5, 2.0)                       # a low box in the middle of an open 4 x 3 m floor
+    fill(occupied, 0.0, 0.0, 4.0, 0.2)                       # and a wall along the bottom
+    grid = OccupancyGrid((0, 0), CELL, np.where(occupied, 1.0, -1.0).astype(np.float32))
+    nodes = np.array([[3.0, 1.5],                            # straight across the box
+                      [1.0, 2.6],                            # up, past the box's corner at 0.5 m
+                      [3.0, 2.45],                           # along the box's top, 0.2 m off it at the end
+                      [0.5, 0.5]])                           # back, in the open
+    robot = np.array([1.0, 1.5])
+    assert selection._leg_clear(cfg, grid, robot, nodes).tolist() == [False, True, False, True]
+    assert selection._leg_clear(dataclasses.replace(cfg, leg_check=False), grid, robot, nodes).all()
+    # a robot pressed against the wall (nearer than its radius) may drive along it or away from it, not into it
+    robot = np.array([3.0, 0.33])
+    along, away, into = [3.8, 0.33], [3.0, 0.8], [3.2, 0.1]
+    assert selection._leg_clear(cfg, grid, robot, np.array([along, away, into])).tolist() == [True, True, False]
+    assert selection._robot_node(np.array([into, away]), robot, np.array([False, True])) == 1     # the nearest clear
+    assert selection._robot_node(np.array([into, away]), robot, np.array([False, False])) == 0    # else the nearest
+
+
+def test_a_bump_disc_never_covers_the_robot_and_its_node_is_one_it_can_drive_to():
+    free = three_rooms()
+    fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0)], [])
+    cfg = selection.SelectionConfig(variant="gain_cost")
+    pose = (5.0, 1.5, math.pi)
+    state = state_on(cfg, free, selection.Target((1.5, 1.5), math.pi, "local", 0), pose)
+    rec = StepRecord(frame=blind_frame(*pose, step=1), perception=PerceptionOut(np.full((H, W), 0.1, np.float32), 0.0,
+                                                                                 False), mapping=mo, fields=fo)
+    state, out = selection.step(cfg, rec, state, derive_rng(0, "sel"))
+    assert len(state.bumps) == 1                             # it did not move toward its target: a bump
+    marked = selection._with_bumps(cfg, state.grid, state.bumps)
+    robot = np.array(pose[:2])
+    ij = marked.world_to_cell(robot)
+    assert not marked.occupied(cfg.occupancy)[ij[0], ij[1]]
+    r = cfg.voronoi.robot_radius_m
+    near = marked.cell_to_world(np.argwhere(marked.occupied(cfg.occupancy) & ~state.grid.occupied(cfg.occupancy)))
+    assert np.hypot(*(near - robot).T).min() >= r - CELL     # the disc starts at the robot's footprint
+    ahead = out.node_xy_m[:, 0] < robot[0] - 0.2
+    behind = np.hypot(*(out.node_xy_m - robot).T) < 1.0
+    assert not out.node_leg_clear[ahead & (np.abs(out.node_xy_m[:, 1] - 1.5) < 0.2)].any()   # straight into the disc
+    assert out.node_leg_clear[behind & ~ahead].all()
+    node = selection._robot_node(out.node_xy_m, robot, out.node_leg_clear)
+    assert out.node_leg_clear[node]
