@@ -35,6 +35,13 @@ variants a reached view bans the views overlapping it (``reached_ban_deg``). One
 unreachable is not banned: it cannot be chosen while it stays unreachable, and a door that
 closes in one graph build (a person in it) often opens in the next.
 
+The robot's node. The graph's edges keep clear of the grid's obstacles, but the way from the
+robot to its first node is a straight line, and the nearest node can lie across an obstacle
+(one the camera saw from afar and cannot see now, low and near). ``SelectionOut.node_leg_clear``
+marks the nodes whose straight way from the robot keeps the robot's radius clear of the grid's
+occupied cells and kept bump discs; the robot's node is the nearest of those, and the planner
+starts its path only at one of them.
+
 Visit counts (eq. 10): the robot's positions of all past steps are kept in the state;
 ``P_visit(R_k)`` is the mean over R_k's nodes of the number of past positions within
 ``visit_radius_m`` of the node, divided by ``visit_norm_steps``.
