@@ -367,7 +367,7 @@ def reevaluate(specs: list[RunSpec], *, workers: int = 1, progress: bool = True)
             from concurrent.futures import ProcessPoolExecutor, as_completed
 
             with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
-                                     initializer=_die_with_parent) as pool:
+                                     initializer=_die_with_parent, initargs=(os.getpid(),)) as pool:
                 for f in as_completed([pool.submit(_reeval_worker, p, ov) for p in paths]):
                     out.append(f.result())
                     bar.update(1)
@@ -381,16 +381,19 @@ def _worker(spec: RunSpec, torch_threads: int | None) -> dict[str, Any]:
 
 
 # ---------------------------------------------------------------------------------------- the sweep
-def _die_with_parent() -> None:
+def _die_with_parent(parent_pid: int) -> None:
     """Pool initializer: on Linux the worker is sent SIGTERM when the dagsbench process dies, so a
-    killed sweep leaves no workers running; elsewhere a no-op."""
+    killed sweep leaves no workers running; elsewhere a no-op. A worker whose parent died before
+    this ran (while the worker was still importing) is no longer its child and exits at once."""
     import ctypes
     import signal
 
     try:
         ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))   # PR_SET_PDEATHSIG
     except (OSError, AttributeError):
-        pass
+        return
+    if os.getppid() != parent_pid:
+        os._exit(1)
 
 
 def run_local(specs: list[RunSpec], workers: int) -> Iterator[dict[str, Any]]:
@@ -403,7 +406,7 @@ def run_local(specs: list[RunSpec], workers: int) -> Iterator[dict[str, Any]]:
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
-                             initializer=_die_with_parent) as pool:
+                             initializer=_die_with_parent, initargs=(os.getpid(),)) as pool:
         futures = [pool.submit(_worker, spec, 1) for spec in specs]
         for f in as_completed(futures):
             yield f.result()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -189,3 +190,13 @@ def test_killing_dagsbench_leaves_no_pool_workers(tmp_path):
     while time.monotonic() < deadline and any(alive(w) for w in workers):
         time.sleep(0.2)
     assert not any(alive(w) for w in workers)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="parent-death signal is Linux-only")
+def test_a_pool_worker_whose_parent_died_while_it_started_exits():
+    # the parent-death signal only covers a parent that dies after the initializer ran
+    code = "import sys; from recorder.bench import _die_with_parent; _die_with_parent(int(sys.argv[1])); print('alive')"
+    orphan = subprocess.run([sys.executable, "-c", code, "1"], capture_output=True, text=True, timeout=120)
+    assert orphan.returncode == 1 and "alive" not in orphan.stdout
+    child = subprocess.run([sys.executable, "-c", code, str(os.getpid())], capture_output=True, text=True, timeout=120)
+    assert child.returncode == 0 and "alive" in child.stdout
