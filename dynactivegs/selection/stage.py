@@ -176,9 +176,9 @@ class SelectionConfig:
     voronoi.robot_radius_m from the grid's occupied cells and bump discs (or, where the robot stands nearer
     than that, gets no nearer). The robot's own node is the nearest such node, and the planner starts its path
     only at one. False: every way counts as clear, and the nearest node is the robot's. Measured: a robot
-    beside a low box that the camera saw from afar cut the corner to a node 0.76 m away, bumped into the box,
-    and its next nearest node lay straight across the box: it bumped 86 times in a row (full, apartment-00,
-    seed 2)."""
+    beside a low box cut the corner to a node 0.76 m away, bumped into the box, and its next nearest node
+    lay straight across the box: it bumped 86 times in a row (full, apartment-00, seed 2, 1000 steps: 64.5 %
+    C.R. and 159 collisions; with the check 93.7 % and 31)."""
 
     def __post_init__(self) -> None:
         check_config(self.variant in SELECTION_VARIANTS, "selection.variant", self.variant,
