@@ -37,7 +37,7 @@ closes in one graph build (a person in it) often opens in the next.
 
 The robot's node. The graph's edges keep clear of the grid's obstacles, but the way from the
 robot to its first node is a straight line, and the nearest node can lie across an obstacle
-(one the camera saw from afar and cannot see now, low and near). ``SelectionOut.node_leg_clear``
+(say one too low for the camera to see when near). ``SelectionOut.node_leg_clear``
 marks the nodes whose straight way from the robot keeps the robot's radius clear of the grid's
 occupied cells and kept bump discs; the robot's node is the nearest of those, and the planner
 starts its path only at one of them.
