@@ -338,6 +338,7 @@ def _replay_refinement(cfg: DagsConfig, reader: LogReader, states: list[object],
             return Difference(last_step, REFINED_MAP_TOPIC, f.name, detail), False
     return None, True
 
+
 def _write_step(writer: Any, ls: LoggedStep, out: StepRecord, states: list[object], timings: dict[str, float],
                 first_stage: int) -> None:
     t = ls.stamp_ns

@@ -45,7 +45,7 @@ from dynactivegs.fields.project import FloorMap, motion_floor_map, segment_means
 from dynactivegs.planning.actions import ActionConfig, StuckState, forward_blocked, is_stuck, next_action, update_stuck
 from dynactivegs.planning.paths import PathConfig, dijkstra, ema_update, variant_edge_cost
 from dynactivegs.records import PlanningOut, SelectionOut, StepRecord, robot_pose_of
-from dynactivegs.selection.voronoi import GraphArrays
+from dynactivegs.selection.voronoi import GraphArrays, nearest_clear_node
 from dynactivegs.sim.robot import Action, wrap_angle
 
 
@@ -175,7 +175,7 @@ def _source(cfg: PlanningConfig, sel: SelectionOut, arrays: GraphArrays, to_targ
     its next edge; a turn step is worth one forward step) and its eq. (11) cost to the target."""
     d = np.hypot(*(sel.node_xy_m - robot_xy).T)
     clear = sel.node_leg_clear
-    near = int(np.argmin(np.where(clear, d, np.inf))) if clear.any() else int(np.argmin(d))
+    near = nearest_clear_node(sel.node_xy_m, robot_xy, clear)
     cand = {near}
     if cfg.source_radius_m > 0.0:
         ring = {near}

@@ -67,7 +67,8 @@ from dynactivegs.selection.occupancy import OccupancyConfig, OccupancyGrid, upda
 from dynactivegs.selection.subregions import SubregionConfig, Subregions, cluster_subregions
 from dynactivegs.selection.visibility import (VisibilityConfig, bin_gains, column_occluders, occluder_grid,
                                                view_gains)
-from dynactivegs.selection.voronoi import GraphArrays, VoronoiConfig, graph_arrays, graph_from_occupancy, node_xy
+from dynactivegs.selection.voronoi import (GraphArrays, VoronoiConfig, graph_arrays, graph_from_occupancy,
+                                           nearest_clear_node, node_xy)
 from dynactivegs.sim.robot import wrap_angle
 
 SelectionVariant = Literal["random", "static_gain", "gain_cost", "full", "frontier"]
@@ -445,14 +446,6 @@ def _leg_clear(cfg: SelectionConfig, grid: OccupancyGrid, robot_xy: np.ndarray, 
     return ~low
 
 
-def _robot_node(xy_nodes: np.ndarray, robot_xy: np.ndarray, leg_clear: np.ndarray) -> int:
-    """The robot's node: the nearest one it can drive to straight (the nearest of all when there is none)."""
-    if len(xy_nodes) == 0:
-        return -1
-    d = np.hypot(xy_nodes[:, 0] - robot_xy[0], xy_nodes[:, 1] - robot_xy[1])
-    return int(np.argmin(np.where(leg_clear, d, np.inf))) if leg_clear.any() else int(np.argmin(d))
-
-
 # ---------------------------------------------------------------------------------------------- choosing
 def _bumps_since(cfg: SelectionConfig, bumps: tuple[tuple[float, float, int], ...], step: int) -> int:
     """How many of the kept bump discs were marked at or after ``step``."""
@@ -614,16 +607,18 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
     history = np.concatenate([state.history_xy_m, robot_xy[None]])
     fmap = motion_floor_map(rec.fields, cfg.um_band_lo_m, cfg.um_band_hi_m) if 0 not in rec.fields.u_m.shape else None
 
+    marked = _with_bumps(cfg, grid, bumps)              # for the graph and the straight ways to its nodes
+
     # graph (amortised rebuild)
     G, arrays, regions, graph_step = state.graph, state.arrays, state.regions, state.graph_step
     _, d_near = _nearest(node_xy(G), robot_xy)
     if (graph_step < 0 or now - graph_step >= cfg.rebuild_every or d_near > cfg.rebuild_moved_m or bumped
             or len(bumps) != len(state.bumps)):
-        G, arrays, regions = _build_graph(cfg, _with_bumps(cfg, grid, bumps), fmap)
+        G, arrays, regions = _build_graph(cfg, marked, fmap)
         graph_step = now
     xy_nodes = node_xy(G)
-    leg_clear = _leg_clear(cfg, _with_bumps(cfg, grid, bumps), robot_xy, xy_nodes)
-    robot_node = _robot_node(xy_nodes, robot_xy, leg_clear)
+    leg_clear = _leg_clear(cfg, marked, robot_xy, xy_nodes)
+    robot_node = nearest_clear_node(xy_nodes, robot_xy, leg_clear)   # the nearest it can drive to straight
 
     # progress (stuck detection from the pose history)
     anchor, count = state.stuck_anchor_xy_m, state.stuck_count

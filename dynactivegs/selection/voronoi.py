@@ -445,6 +445,15 @@ def nearest_node(G: nx.Graph, xy_m: np.ndarray) -> int:
     return int(i)
 
 
+def nearest_clear_node(xy_nodes: np.ndarray, xy_m: np.ndarray, clear: np.ndarray) -> int:
+    """Index of the row of ``xy_nodes (N, 2)`` nearest to ``xy_m (2,)`` among those where ``clear (N,)``
+    (say, the straight way there is free), the nearest of all when none is; -1 when N is 0."""
+    if len(xy_nodes) == 0:
+        return -1
+    d = np.hypot(xy_nodes[:, 0] - xy_m[0], xy_nodes[:, 1] - xy_m[1])
+    return int(np.argmin(np.where(clear, d, np.inf))) if clear.any() else int(np.argmin(d))
+
+
 @dataclass(frozen=True, slots=True)
 class GraphArrays:
     """A graph's edges as arrays, in a fixed order (sorted by ``(u, v)``, ``u < v``)."""

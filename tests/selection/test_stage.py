@@ -17,6 +17,7 @@ from dynactivegs.rng import derive_rng
 from dynactivegs.selection import stage as selection
 from dynactivegs.selection.occupancy import OccupancyGrid
 from dynactivegs.selection.subregions import SubregionConfig
+from dynactivegs.selection.voronoi import nearest_clear_node
 from dynactivegs.sim.robot import Action, apply_action
 
 from tests.selection.scenes import intrinsics, render_depth, view
@@ -470,8 +471,8 @@ def test_a_way_straight_across_an_obstacle_is_not_clear():
     robot = np.array([3.0, 0.33])
     along, away, into = [3.8, 0.33], [3.0, 0.8], [3.2, 0.1]
     assert selection._leg_clear(cfg, grid, robot, np.array([along, away, into])).tolist() == [True, True, False]
-    assert selection._robot_node(np.array([into, away]), robot, np.array([False, True])) == 1     # the nearest clear
-    assert selection._robot_node(np.array([into, away]), robot, np.array([False, False])) == 0    # else the nearest
+    assert nearest_clear_node(np.array([into, away]), robot, np.array([False, True])) == 1     # the nearest clear
+    assert nearest_clear_node(np.array([into, away]), robot, np.array([False, False])) == 0    # else the nearest
 
 
 def test_a_bump_disc_never_covers_the_robot_and_its_node_is_one_it_can_drive_to():
@@ -495,5 +496,5 @@ def test_a_bump_disc_never_covers_the_robot_and_its_node_is_one_it_can_drive_to(
     behind = np.hypot(*(out.node_xy_m - robot).T) < 1.0
     assert not out.node_leg_clear[ahead & (np.abs(out.node_xy_m[:, 1] - 1.5) < 0.2)].any()   # straight into the disc
     assert out.node_leg_clear[behind & ~ahead].all()
-    node = selection._robot_node(out.node_xy_m, robot, out.node_leg_clear)
+    node = nearest_clear_node(out.node_xy_m, robot, out.node_leg_clear)
     assert out.node_leg_clear[node]
