@@ -498,3 +498,38 @@ def test_a_bump_disc_never_covers_the_robot_and_its_node_is_one_it_can_drive_to(
     assert out.node_leg_clear[behind & ~ahead].all()
     node = nearest_clear_node(out.node_xy_m, robot, out.node_leg_clear)
     assert out.node_leg_clear[node]
+
+
+def test_a_target_given_up_as_stuck_in_front_of_a_person_leaves_a_disc_the_next_way_avoids():
+    free = three_rooms()
+    fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0)], [])          # room L, beyond the corridor, is worth seeing
+    pose = (3.95, 1.5, math.pi)                                          # in C at the corridor's mouth, facing L
+    person = (3.55, 1.3, 3.7, 1.7, 1.8)                                  # standing in the corridor, 0.3 m ahead
+    depth, which = render_depth(view(*pose), K, W, H, (9.0, 3.0), [person])
+    beta = np.where(which == 0, 2.0, 0.1).astype(np.float32)             # a person: moving
+    frame = Frame(41, 41, np.zeros((H, W, 3), np.uint8), depth, K.copy(), view(*pose))
+    rec = StepRecord(frame=frame, perception=PerceptionOut(beta, 0.0, False), mapping=mo, fields=fo)
+    target = selection.Target((1.5, 1.5), math.pi, "local", 0)
+
+    def give_up(cfg):
+        state = dataclasses.replace(state_on(cfg, free, target), stuck_count=cfg.stuck_steps,
+                                    stuck_anchor_xy_m=pose[:2])
+        return selection.step(cfg, rec, state, derive_rng(0, "sel"))
+
+    cfg = selection.SelectionConfig(variant="gain_cost")
+    state, out = give_up(cfg)
+    assert out.mode != "keep" and state.bumps == ()                      # given up; a wait, not a bump
+    assert len(state.jams) == 1 and state.jams[0][2] == 41 + cfg.bump_hold_steps
+    centre = np.array(state.jams[0][:2])
+    assert np.allclose(centre, [pose[0] - cfg.voronoi.robot_radius_m - cfg.bump_radius_m, 1.5])
+    beyond = out.node_xy_m[:, 0] < person[0]
+    robot_node = nearest_clear_node(out.node_xy_m, np.array(pose[:2]), out.node_leg_clear)
+    assert not np.isfinite(selection._path_lengths(state.arrays, robot_node)[0][beyond]).any()   # cut off
+    assert out.target_xy_m[0] > person[2]                                # so the next target is on this side
+    # without the disc the next target lies beyond the person again
+    state, out = give_up(dataclasses.replace(cfg, stuck_disc=False))
+    assert state.jams == () and out.target_xy_m[0] < person[0]
+    # a target given up with nothing ahead leaves no disc
+    rec = dataclasses.replace(rec, frame=blind_frame(*pose, step=41))
+    state, out = give_up(cfg)
+    assert out.mode != "keep" and state.jams == ()
