@@ -183,7 +183,10 @@ class SelectionConfig:
     and the robot drives off. Without it the best next view usually lay beyond the same spot, and a robot
     standing in a corridor while people waited to pass it (and it for them) stayed: full, apartment-03,
     seed 0, 1000 steps, stood 188 steps at a doorway with people 0.48 m away (touching), 158 of them
-    waiting, over four targets given up there one after the other."""
+    waiting, over four targets given up there one after the other. With it that run waited 44 steps in
+    all (189 without), and refined C.R. went from 85.4 to 87.4 %; apartment-00 seed 0, which ended in the
+    same kind of wait, went from 87.0 to 93.6 %. Both runs' paths part from the first give-up on, so
+    these are two samples of a chaotic loop, not a controlled measurement."""
 
     leg_check: bool = True
     """``SelectionOut.node_leg_clear`` says which nodes the robot can drive to in a straight line: the way keeps
