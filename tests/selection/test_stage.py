@@ -523,9 +523,14 @@ def test_a_target_given_up_as_stuck_in_front_of_a_person_leaves_a_disc_the_next_
     centre = np.array(state.jams[0][:2])
     assert np.allclose(centre, [pose[0] - cfg.voronoi.robot_radius_m - cfg.bump_radius_m, 1.5])
     beyond = out.node_xy_m[:, 0] < person[0]
+    assert beyond.any()                                                  # room L is still on the graph ...
     robot_node = nearest_clear_node(out.node_xy_m, np.array(pose[:2]), out.node_leg_clear)
-    assert not np.isfinite(selection._path_lengths(state.arrays, robot_node)[0][beyond]).any()   # cut off
+    assert not np.isfinite(selection._path_lengths(state.arrays, robot_node)[0][beyond]).any()   # ... cut off
     assert out.target_xy_m[0] > person[2]                                # so the next target is on this side
+    # the disc is dropped after bump_hold_steps
+    later = StepRecord(frame=blind_frame(4.5, 1.5, 0.0, step=41 + cfg.bump_hold_steps), perception=rec.perception,
+                       mapping=mo, fields=fo)
+    assert selection.step(cfg, later, dataclasses.replace(state, last_pose=None), derive_rng(0, "sel"))[0].jams == ()
     # without the disc the next target lies beyond the person again
     state, out = give_up(dataclasses.replace(cfg, stuck_disc=False))
     assert state.jams == () and out.target_xy_m[0] < person[0]
