@@ -1,0 +1,120 @@
+"""Where a run's held-out PSNR is lost: holes, wrong depth, or appearance on the right surface.
+
+    python benchmarks/psnr_breakdown.py runs/full/apartment-01-seed0.mcap [more.mcap ...] [--online]
+
+For each run log it renders the refined map (``--online``: the last map snapshot, the map as the
+loop left it) at the run's held-out views, the same views and ground truth ``dagsbench`` scores,
+and splits each view's pixels four ways:
+
+- **hole**: the render's opacity is below 0.9 (the map has nothing there);
+- **front**: the rendered depth is nearer than the true depth by more than max(10 cm, 5 %)
+  (floaters, or a surface where there is none);
+- **behind**: farther by as much (the true surface is missing and the view sees past it);
+- **right**: the rest, pixels whose surface is in the right place.
+
+It prints the PSNR, each class's share of the pixels and of the squared error, the PSNR over
+the ``right`` pixels alone (what the colours of correctly placed Gaussians reach), and the
+worst views. All numbers are means over views.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+HOLE_ALPHA = 0.9
+DEPTH_TOL_M = 0.10
+DEPTH_TOL_REL = 0.05
+
+
+def view_breakdown(pred_rgb: np.ndarray, pred_depth: np.ndarray, pred_alpha: np.ndarray, true_rgb: np.ndarray,
+                   true_depth: np.ndarray) -> dict[str, float]:
+    """One view's PSNR and its split: rgb in [0, 1] (H, W, 3), depths in m (H, W; 0 = no return)."""
+    err = ((pred_rgb - true_rgb) ** 2).mean(-1)
+    hole = pred_alpha < HOLE_ALPHA
+    tol = np.maximum(DEPTH_TOL_M, DEPTH_TOL_REL * true_depth)
+    seen = ~hole & (true_depth > 0)
+    front = seen & (pred_depth < true_depth - tol)
+    behind = seen & (pred_depth > true_depth + tol)
+    right = ~(hole | front | behind)
+    total = max(float(err.sum()), 1e-12)
+    out = {"psnr_db": float(10 * np.log10(1 / max(err.mean(), 1e-12)))}
+    for name, m in (("hole", hole), ("front", front), ("behind", behind)):
+        out[f"{name}_px"] = float(m.mean())
+        out[f"{name}_err"] = float(err[m].sum() / total)
+    out["right_psnr_db"] = float(10 * np.log10(1 / max(err[right].mean(), 1e-12))) if right.any() else float("nan")
+    return out
+
+
+def run_breakdown(mcap: Path, online: bool) -> tuple[str, list[dict[str, float]]]:
+    """(a label, one breakdown per held-out view) of the run logged in ``mcap``."""
+    import torch
+
+    from dynactivegs.config import config_from_json
+    from dynactivegs.errors import DagsError
+    from dynactivegs.eval.config import EvalConfig
+    from dynactivegs.eval.metrics import SceneEvaluator
+    from dynactivegs.splat.render import render
+    from recorder.mcap_log import MAP_TOPIC
+    from replay.source import LogReader
+
+    reader = LogReader(mcap)
+    if reader.config_json is None:
+        raise DagsError(f"{mcap}: the log has no config; it was not written by dagsrun or dagsbench")
+    cfg = config_from_json(reader.config_json)
+    traj, last_map = [], None
+    for st in reader.steps():
+        traj.append((st["/truth"].robot.x_m, st["/truth"].robot.y_m))
+        if MAP_TOPIC in st:
+            last_map = st[MAP_TOPIC]
+    g = last_map if online else reader.refined_map()
+    if g is None:
+        raise DagsError(f"{mcap}: no {'map snapshot' if online else 'refined map'} in the log"
+                        f"{'' if online else '; pass --online to use the last map snapshot'}")
+    ev = SceneEvaluator(cfg.sim, EvalConfig())
+    poses, rgb, depth = ev.heldout(np.asarray(traj, np.float64))
+    cam = cfg.sim.camera
+    rows = []
+    with torch.no_grad():
+        for i, T in enumerate(poses):
+            out = render(g, ev.K, T, cam.width_px, cam.height_px, near_plane=cam.min_depth_m)
+            true = rgb[i].astype(np.float64)
+            true = true / 255.0 if rgb.dtype == np.uint8 else true
+            rows.append(view_breakdown(out.rgb.double().clamp(0, 1).cpu().numpy(), out.depth.cpu().numpy(),
+                                       out.alpha.cpu().numpy(), true, depth[i]))
+    label = f"{cfg.sim.scene} seed {cfg.seed}, {Path(mcap).parent.name}"
+    return label, rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("mcap", nargs="+", type=Path, help="run logs (dagsbench writes them under OUT/runs/PRESET/)")
+    ap.add_argument("--online", action="store_true", help="the last map snapshot instead of the refined map")
+    ap.add_argument("--worst", type=int, default=3, help="how many of the worst views to list")
+    args = ap.parse_args()
+    from dynactivegs.errors import DagsError
+
+    head = ("| run | PSNR | hole px / err | front px / err | behind px / err | PSNR right px | worst views (dB) |\n"
+            "|---|---|---|---|---|---|---|")
+    lines = []
+    for path in args.mcap:
+        try:
+            label, rows = run_breakdown(path, args.online)
+        except DagsError as e:
+            sys.exit(f"error: {e}")
+        mean = {k: float(np.nanmean([r[k] for r in rows])) for k in rows[0]}
+        worst = ", ".join(f"{x:.1f}" for x in sorted(r["psnr_db"] for r in rows)[:args.worst])
+        lines.append(f"| {label} | {mean['psnr_db']:.2f} | "
+                     + " | ".join(f"{100 * mean[f'{c}_px']:.1f} / {100 * mean[f'{c}_err']:.1f} %"
+                                  for c in ("hole", "front", "behind"))
+                     + f" | {mean['right_psnr_db']:.2f} | {worst} |")
+        print(lines[-1] if len(lines) > 1 else head + "\n" + lines[-1], flush=True)
+
+
+if __name__ == "__main__":
+    main()
