@@ -4,13 +4,17 @@
 
 For each run log it renders the refined map (``--online``: the last map snapshot, the map as the
 loop left it) at the run's held-out views, the same views and ground truth ``dagsbench`` scores,
-and splits each view's pixels four ways:
+and splits each view's pixels four ways (:func:`dynactivegs.eval.rendering.psnr_split`):
 
 - **hole**: the render's opacity is below 0.9 (the map has nothing there);
 - **front**: the rendered depth is nearer than the true depth by more than max(10 cm, 5 %)
   (floaters, or a surface where there is none);
 - **behind**: farther by as much (the true surface is missing and the view sees past it);
 - **right**: the rest, pixels whose surface is in the right place.
+
+``dagsbench`` keeps the means of this split in each run's metrics (``hole_err_pct``,
+``front_err_pct``, ``behind_err_pct``, ``psnr_right_db``); this script gives it for logs measured
+before that, for the map as the loop left it, and with the worst views.
 
 It prints the PSNR, each class's share of the pixels and of the squared error, the PSNR over
 the ``right`` pixels alone (what the colours of correctly placed Gaussians reach), and the
@@ -20,36 +24,13 @@ worst views. All numbers are means over views.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-HOLE_ALPHA = 0.9
-DEPTH_TOL_M = 0.10
-DEPTH_TOL_REL = 0.05
-
-
-def view_breakdown(pred_rgb: np.ndarray, pred_depth: np.ndarray, pred_alpha: np.ndarray, true_rgb: np.ndarray,
-                   true_depth: np.ndarray) -> dict[str, float]:
-    """One view's PSNR and its split: rgb in [0, 1] (H, W, 3), depths in m (H, W; 0 = no return)."""
-    err = ((pred_rgb - true_rgb) ** 2).mean(-1)
-    hole = pred_alpha < HOLE_ALPHA
-    tol = np.maximum(DEPTH_TOL_M, DEPTH_TOL_REL * true_depth)
-    seen = ~hole & (true_depth > 0)
-    front = seen & (pred_depth < true_depth - tol)
-    behind = seen & (pred_depth > true_depth + tol)
-    right = ~(hole | front | behind)
-    total = max(float(err.sum()), 1e-12)
-    out = {"psnr_db": float(10 * np.log10(1 / max(err.mean(), 1e-12)))}
-    for name, m in (("hole", hole), ("front", front), ("behind", behind)):
-        out[f"{name}_px"] = float(m.mean())
-        out[f"{name}_err"] = float(err[m].sum() / total)
-    out["right_psnr_db"] = float(10 * np.log10(1 / max(err[right].mean(), 1e-12))) if right.any() else float("nan")
-    return out
-
 
 def run_breakdown(mcap: Path, online: bool) -> tuple[str, list[dict[str, float]]]:
     """(a label, one breakdown per held-out view) of the run logged in ``mcap``."""
@@ -59,6 +40,7 @@ def run_breakdown(mcap: Path, online: bool) -> tuple[str, list[dict[str, float]]
     from dynactivegs.errors import DagsError
     from dynactivegs.eval.config import EvalConfig
     from dynactivegs.eval.metrics import SceneEvaluator
+    from dynactivegs.eval.rendering import psnr_db, psnr_split
     from dynactivegs.splat.render import render
     from recorder.mcap_log import MAP_TOPIC
     from replay.source import LogReader
@@ -83,10 +65,8 @@ def run_breakdown(mcap: Path, online: bool) -> tuple[str, list[dict[str, float]]
     with torch.no_grad():
         for i, T in enumerate(poses):
             out = render(g, ev.K, T, cam.width_px, cam.height_px, near_plane=cam.min_depth_m)
-            true = rgb[i].astype(np.float64)
-            true = true / 255.0 if rgb.dtype == np.uint8 else true
-            rows.append(view_breakdown(out.rgb.double().clamp(0, 1).cpu().numpy(), out.depth.cpu().numpy(),
-                                       out.alpha.cpu().numpy(), true, depth[i]))
+            split = psnr_split(out.rgb, out.depth.cpu().numpy(), out.alpha.cpu().numpy(), rgb[i], depth[i])
+            rows.append({"psnr_db": psnr_db(out.rgb, rgb[i]), **dataclasses.asdict(split)})
     label = f"{cfg.sim.scene} seed {cfg.seed}, {Path(mcap).parent.name}"
     return label, rows
 

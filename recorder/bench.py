@@ -181,7 +181,7 @@ class _Fanout:
             s.on_step(rec, truth, states, metrics)
 
 
-ONLINE_KEYS = ("acc_cm", "comp_cm", "cr_pct", "psnr_db", "ssim", "depth_l1_cm", "lpips")
+ONLINE_KEYS = ("acc_cm", "comp_cm", "cr_pct", "psnr_db", "ssim", "depth_l1_cm", "lpips", "psnr_right_db")
 """Metrics of the unrefined final map kept in the 100 % row under ``online``."""
 
 

@@ -9,7 +9,8 @@
 - ``views.py``: survey views (lattice candidates, the greedy cover of the ground truth and
   the C.R. a perfect map reaches from them), seeded held-out novel views away from the
   trajectory, static-only ground-truth renders.
-- ``rendering.py``: PSNR, SSIM, depth L1 and (with local weights, ``lpips.py``) LPIPS.
+- ``rendering.py``: PSNR, SSIM, depth L1 and (with local weights, ``lpips.py``) LPIPS, and
+  where a view's PSNR is lost (holes, surfaces too near or too far, colours).
 - ``progress.py``: 25/50/75/100 % checkpoints of a step budget, cheap coverage.
 - ``metrics.py``: :class:`SceneEvaluator` (per-scene state) and the :class:`Metrics` result.
 - ``classification.py``: AUROC of per-pixel scores.

@@ -8,6 +8,7 @@ metrics at several checkpoints of a run, or for several runs, share it.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,6 +46,11 @@ class Metrics:
     lpips: float | None           # None when LPIPS weights are not available locally
     lpips_note: str               # the weights used, or why LPIPS is n/a
     n_views: int
+    psnr_views_db: tuple[float, ...] = ()  # PSNR of each held-out view
+    hole_err_pct: float = math.nan         # where the PSNR is lost, mean over views (eval.rendering.psnr_split):
+    front_err_pct: float = math.nan        # % of the squared colour error on holes, on surfaces rendered too near,
+    behind_err_pct: float = math.nan       # on surfaces rendered too far,
+    psnr_right_db: float = math.nan        # and the PSNR of the pixels whose surface is in the right place
 
     def summary(self) -> str:
         """One line for logs and progress bars."""
@@ -124,4 +130,6 @@ class SceneEvaluator:
                        cr_threshold_cm=geo.cr_threshold_cm, recon_method=rec.method,
                        recon_description=rec.description, n_recon_points=geo.n_recon, n_gt_points=geo.n_gt,
                        psnr_db=ren.psnr_db, ssim=ren.ssim, depth_l1_cm=ren.depth_l1_cm, lpips=ren.lpips,
-                       lpips_note=ren.lpips_note, n_views=ren.n_views)
+                       lpips_note=ren.lpips_note, n_views=ren.n_views, psnr_views_db=ren.psnr_views_db,
+                       hole_err_pct=ren.hole_err_pct, front_err_pct=ren.front_err_pct,
+                       behind_err_pct=ren.behind_err_pct, psnr_right_db=ren.psnr_right_db)

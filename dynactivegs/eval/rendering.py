@@ -7,11 +7,15 @@ Per view, then averaged over views (the 3DGS convention):
 - depth L1 (cm): mean |rendered - true| z-depth over pixels with a true depth return; a
   pixel the map leaves empty counts with its rendered depth 0;
 - LPIPS (AlexNet) only with a model loaded from local weights (:mod:`dynactivegs.eval.lpips`);
-  otherwise ``None`` and the reason.
+  otherwise ``None`` and the reason;
+- where the PSNR is lost (:func:`psnr_split`): the share of the squared colour error on pixels
+  the map leaves empty, on pixels whose rendered surface is too near or too far, and the PSNR
+  over the rest, where the surface is in the right place and only its colours can be wrong.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -59,6 +63,54 @@ def _nanmean(values: list[float]) -> float:
     return float(np.mean(finite)) if finite else float("nan")
 
 
+HOLE_ALPHA = 0.9
+"""A pixel whose rendered accumulated opacity is below this is a hole in the map."""
+DEPTH_TOL_M = 0.10
+DEPTH_TOL_REL = 0.05
+"""A rendered depth off the true one by more than max(DEPTH_TOL_M, DEPTH_TOL_REL * true depth) is misplaced."""
+
+
+@dataclass(frozen=True)
+class PsnrSplit:
+    """Where one view's squared colour error lies. Each pixel is in one class: a **hole** (rendered
+    opacity < HOLE_ALPHA), **front** (a true depth return, and the render's surface nearer by more than
+    the tolerance: a floater or a surface where there is none), **behind** (farther by as much: the view
+    sees past a missing surface) or **right** (the rest). ``*_px``: share of the pixels, ``*_err``: share
+    of the summed squared error, both in [0, 1]."""
+
+    hole_px: float
+    hole_err: float
+    front_px: float
+    front_err: float
+    behind_px: float
+    behind_err: float
+    right_psnr_db: float          # PSNR over the right pixels alone (nan when there are none)
+
+
+def psnr_split(pred_rgb: np.ndarray, pred_depth_m: np.ndarray, pred_alpha: np.ndarray, true_rgb: np.ndarray,
+               true_depth_m: np.ndarray) -> PsnrSplit:
+    """The :class:`PsnrSplit` of one view: rgb (H, W, 3) as for :func:`psnr_db`, depths (H, W) in m (true 0:
+    no return), alpha (H, W) in [0, 1]."""
+    err = ((_image(pred_rgb).clamp(0, 1) - _image(true_rgb)) ** 2).mean(-1).numpy()
+    pred_depth_m, true_depth_m = np.asarray(pred_depth_m), np.asarray(true_depth_m)
+    assert err.shape == pred_depth_m.shape == true_depth_m.shape == np.shape(pred_alpha), "image sizes differ"
+    hole = np.asarray(pred_alpha) < HOLE_ALPHA
+    tol = np.maximum(DEPTH_TOL_M, DEPTH_TOL_REL * true_depth_m)
+    placed = ~hole & (true_depth_m > 0)
+    front = placed & (pred_depth_m < true_depth_m - tol)
+    behind = placed & (pred_depth_m > true_depth_m + tol)
+    right = ~(hole | front | behind)
+    total = float(err.sum())
+    share = (lambda m: float(err[m].sum()) / total) if total > 0 else (lambda m: 0.0)
+    if not right.any():
+        right_psnr = math.nan
+    else:
+        right_mse = float(err[right].mean())
+        right_psnr = math.inf if right_mse == 0 else -10.0 * math.log10(right_mse)
+    return PsnrSplit(float(hole.mean()), share(hole), float(front.mean()), share(front), float(behind.mean()),
+                     share(behind), right_psnr)
+
+
 @dataclass(frozen=True)
 class RenderMetrics:
     """Novel-view metrics averaged over views."""
@@ -69,6 +121,11 @@ class RenderMetrics:
     lpips: float | None           # None: not computed (see lpips_note)
     lpips_note: str               # where the LPIPS weights came from, or why LPIPS is n/a
     n_views: int
+    psnr_views_db: tuple[float, ...] = ()  # per view, in the order of the poses
+    hole_err_pct: float = math.nan         # mean over views of PsnrSplit.hole_err, in %
+    front_err_pct: float = math.nan        # ... of front_err
+    behind_err_pct: float = math.nan       # ... of behind_err
+    psnr_right_db: float = math.nan        # mean over views of PsnrSplit.right_psnr_db (finite ones)
 
 
 def render_metrics(gaussians: Gaussians, poses: np.ndarray, true_rgb: np.ndarray, true_depth_m: np.ndarray,
@@ -85,7 +142,7 @@ def render_metrics(gaussians: Gaussians, poses: np.ndarray, true_rgb: np.ndarray
     assert len(poses) == v and true_rgb.shape == (v, h, w, 3)
     if lpips_model is not None and min(h, w) < LPIPS_MIN_PX:
         lpips_model, lpips_note = None, f"images too small for LPIPS ({w}x{h} px; AlexNet needs >= {LPIPS_MIN_PX} px)"
-    ps, ss, ds, lp = [], [], [], []
+    ps, ss, ds, lp, split = [], [], [], [], []
     with torch.no_grad():
         for i, T in enumerate(poses):
             out = render(gaussians, K, T, w, h, backend=backend, near_plane=near_plane)
@@ -93,7 +150,9 @@ def render_metrics(gaussians: Gaussians, poses: np.ndarray, true_rgb: np.ndarray
             true = _image(true_rgb[i])
             ps.append(psnr(pred, true))
             ss.append(float(ssim(pred, true)))
-            ds.append(depth_l1_cm(out.depth.detach().cpu().numpy(), true_depth_m[i]))
+            pred_depth = out.depth.detach().cpu().numpy()
+            ds.append(depth_l1_cm(pred_depth, true_depth_m[i]))
+            split.append(psnr_split(pred, pred_depth, out.alpha.detach().cpu().numpy(), true, true_depth_m[i]))
             if lpips_model is not None:
                 a = pred.to(torch.float32).permute(2, 0, 1)[None]
                 b = true.to(torch.float32).permute(2, 0, 1)[None]
@@ -102,4 +161,8 @@ def render_metrics(gaussians: Gaussians, poses: np.ndarray, true_rgb: np.ndarray
                          depth_l1_cm=_nanmean(ds),
                          lpips=float(np.mean(lp)) if lp else None,
                          lpips_note=lpips_note or ("LPIPS model given" if lpips_model else "no LPIPS model given"),
-                         n_views=len(poses))
+                         n_views=len(poses), psnr_views_db=tuple(float(p) for p in ps),
+                         hole_err_pct=100.0 * _nanmean([x.hole_err for x in split]),
+                         front_err_pct=100.0 * _nanmean([x.front_err for x in split]),
+                         behind_err_pct=100.0 * _nanmean([x.behind_err for x in split]),
+                         psnr_right_db=_nanmean([x.right_psnr_db for x in split if not math.isinf(x.right_psnr_db)]))

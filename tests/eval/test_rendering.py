@@ -10,7 +10,7 @@ import torch
 from scipy import ndimage
 
 from dynactivegs.eval.lpips import LpipsAlex, load_lpips
-from dynactivegs.eval.rendering import depth_l1_cm, psnr_db, render_metrics, ssim_value
+from dynactivegs.eval.rendering import depth_l1_cm, psnr_db, psnr_split, render_metrics, ssim_value
 from dynactivegs.splat import Gaussians
 from dynactivegs.sim.render import intrinsics
 from dynactivegs.sim.robot import camera_pose
@@ -24,6 +24,32 @@ def test_psnr_of_identical_images_is_inf_and_of_a_known_mse_is_known():
     assert psnr_db(shifted, img) == pytest.approx(20.0, abs=1e-9)
     plus16 = img + np.uint8(16)                                  # MSE (16 / 255)^2
     assert psnr_db(plus16, img) == pytest.approx(20 * math.log10(255 / 16), abs=1e-9)
+
+
+def test_psnr_split_puts_each_pixel_in_one_class_and_the_error_where_it_is():
+    h, w = 10, 20
+    true = np.full((h, w, 3), 0.5)
+    true_depth = np.full((h, w), 2.0)
+    pred, depth, alpha = true.copy(), true_depth.copy(), np.ones((h, w))
+    alpha[:, :4] = 0.5                               # a hole: 20 % of the pixels
+    depth[:, 4:6] = 1.8                              # 20 cm too near (tolerance 10 cm): front, 10 %
+    depth[:, 6:8] = 2.15                             # 15 cm too far: behind, 10 %
+    depth[:, 8:10] = 2.08                            # 8 cm off: still right
+    pred[:, :4] += 0.2                               # the error: 0.04 per pixel in the hole ...
+    pred[:, 4:6] += 0.1                              # ... 0.01 on the front pixels ...
+    pred[:, 10:] += 0.01                             # ... 1e-4 on half the right pixels, none on the behind ones
+    s = psnr_split(pred, depth, alpha, true, true_depth)
+    total = 40 * 0.04 + 20 * 0.01 + 100 * 1e-4
+    assert (s.hole_px, s.front_px, s.behind_px) == pytest.approx((0.2, 0.1, 0.1))
+    assert s.hole_err == pytest.approx(40 * 0.04 / total) and s.front_err == pytest.approx(20 * 0.01 / total)
+    assert s.behind_err == 0.0
+    assert s.right_psnr_db == pytest.approx(-10 * math.log10(100 * 1e-4 / 120))    # 120 right pixels
+    perfect = psnr_split(true, true_depth, np.ones((h, w)), true, true_depth)
+    assert perfect.right_psnr_db == math.inf and perfect.hole_err == perfect.front_err == 0.0
+    # A pixel with no true depth return is never front or behind.
+    no_return = np.zeros((h, w))
+    s = psnr_split(pred, depth, np.ones((h, w)), true, no_return)
+    assert s.front_px == s.behind_px == 0.0 and s.hole_px == 0.0
 
 
 def ssim_twin(a: np.ndarray, b: np.ndarray) -> float:
@@ -125,10 +151,13 @@ def test_render_metrics_of_a_map_that_matches_the_truth(tmp_path):
     m = render_metrics(g, poses, np.stack([rgb, rgb]), np.stack([depth, depth]), K, backend="cpu")
     assert m.n_views == 2 and m.lpips is None and m.lpips_note == "no LPIPS model given"
     assert m.psnr_db > 35.0 and m.ssim > 0.95 and m.depth_l1_cm < 1.0
+    assert m.psnr_views_db == pytest.approx((m.psnr_db, m.psnr_db)) and m.psnr_right_db >= m.psnr_db - 1.0
+    assert m.hole_err_pct < 20.0
     # An empty map: black image, depth 0 everywhere -> depth L1 is the full 200 cm.
     empty = render_metrics(Gaussians.empty(), poses[:1], rgb[None], depth[None], K, backend="cpu")
     assert empty.depth_l1_cm == pytest.approx(200.0, abs=1e-3)
     assert empty.psnr_db == pytest.approx(-10 * math.log10((128 / 255) ** 2), abs=1e-6)
+    assert empty.hole_err_pct == pytest.approx(100.0) and math.isnan(empty.psnr_right_db)
     path = tmp_path / "alex.pth"
     torch.save(lpips_state_dict(1), path)
     model, note = load_lpips(str(path))

@@ -44,6 +44,8 @@ def test_runs_write_metrics_at_every_checkpoint_and_a_log(finished):
         for c in r["checkpoints"]:
             assert 0.0 <= c["cr_pct"] <= 100.0 and c["acc_cm"] > 0 and c["psnr_db"] > 0 and c["n_views"] == 4
             assert c["lpips"] is None and "n/a" in f"{c['lpips_note']} n/a"
+            assert len(c["psnr_views_db"]) == 4 and sum(c["psnr_views_db"]) / 4 == pytest.approx(c["psnr_db"])
+            assert all(0.0 <= c[k] <= 100.0 for k in ("hole_err_pct", "front_err_pct", "behind_err_pct"))
         # the 100 % row measures the refined map (3 passes over the keyframes of steps 0 and 3) and keeps the
         # unrefined one's metrics; the others measure the map as the loop left it
         assert [c["refine_iters"] for c in r["checkpoints"]] == [0, 0, 0, 6]
