@@ -32,6 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+
 def run_breakdown(mcap: Path, online: bool) -> tuple[str, list[dict[str, float]]]:
     """(a label, one breakdown per held-out view) of the run logged in ``mcap``."""
     import torch
@@ -81,7 +82,7 @@ def main() -> None:
 
     head = ("| run | PSNR | hole px / err | front px / err | behind px / err | PSNR right px | worst views (dB) |\n"
             "|---|---|---|---|---|---|---|")
-    lines = []
+    print(head, flush=True)
     for path in args.mcap:
         try:
             label, rows = run_breakdown(path, args.online)
@@ -89,11 +90,10 @@ def main() -> None:
             sys.exit(f"error: {e}")
         mean = {k: float(np.nanmean([r[k] for r in rows])) for k in rows[0]}
         worst = ", ".join(f"{x:.1f}" for x in sorted(r["psnr_db"] for r in rows)[:args.worst])
-        lines.append(f"| {label} | {mean['psnr_db']:.2f} | "
-                     + " | ".join(f"{100 * mean[f'{c}_px']:.1f} / {100 * mean[f'{c}_err']:.1f} %"
-                                  for c in ("hole", "front", "behind"))
-                     + f" | {mean['right_psnr_db']:.2f} | {worst} |")
-        print(lines[-1] if len(lines) > 1 else head + "\n" + lines[-1], flush=True)
+        print(f"| {label} | {mean['psnr_db']:.2f} | "
+              + " | ".join(f"{100 * mean[f'{c}_px']:.1f} / {100 * mean[f'{c}_err']:.1f} %"
+                           for c in ("hole", "front", "behind"))
+              + f" | {mean['right_psnr_db']:.2f} | {worst} |", flush=True)
 
 
 if __name__ == "__main__":
