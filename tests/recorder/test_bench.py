@@ -202,3 +202,26 @@ def test_a_pool_worker_whose_parent_died_while_it_started_exits():
     assert orphan.returncode == 1 and "alive" not in orphan.stdout
     child = subprocess.run([sys.executable, "-c", code, str(os.getpid())], capture_output=True, text=True, timeout=120)
     assert child.returncode == 0 and "alive" in child.stdout
+
+
+def test_psnr_ceiling_reads_a_logged_run(finished):
+    """benchmarks/psnr_ceiling.py on the sweep's full run: its held-out PSNR is dagsbench's, the map fits the
+    views it was trained on far better than the held-out ones after 6 steps, fitting one view alone raises
+    that view's PSNR, and box-filtered renders differ from the point-sampled ones."""
+    import importlib.util
+
+    from dynactivegs.eval.config import EvalConfig
+
+    out, cache = finished
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "psnr_ceiling.py"
+    spec = importlib.util.spec_from_file_location("psnr_ceiling", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    ecfg = EvalConfig(n_views=4, cache_dir=str(cache))
+    label, r = mod.run_ceiling(out / "runs" / "full" / "tiny-00-seed0.mcap", False, 2, 50, 2, ecfg)
+    metrics = json.loads((out / "runs" / "full" / "tiny-00-seed0.json").read_text())["checkpoints"][-1]
+    assert label.startswith("tiny-00 seed 0")
+    assert r["heldout"] == pytest.approx(metrics["psnr_db"], abs=0.05)
+    assert r["train"] > r["heldout"] + 10.0
+    assert r["overfit_after"] > r["overfit_before"]
+    assert 15.0 < r["floor"] < 60.0
