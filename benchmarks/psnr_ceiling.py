@@ -15,7 +15,8 @@ For each run log it prints, next to the held-out PSNR ``dagsbench`` reports (mea
   nearest-texel lookups, while a camera integrates over the pixel. This compares the held-out
   ground truth with the same views rendered at ``--supersample`` x the resolution and
   box-filtered: an error a map cannot remove, since it would need a different sample of the
-  texture in every view. Its PSNR is the ceiling it puts on the held-out PSNR.
+  texture in every view. Its PSNR is roughly the ceiling this puts on the held-out PSNR (a map
+  that renders each pixel's average texture colour scores about this).
 
 All numbers are means over views, in dB.
 """
