@@ -85,7 +85,7 @@ class MappingConfig:
     ghosts 711 -> 387 (on apartment-02 seed 1, 300 steps: 23.12 -> 23.29 dB); 3 refinement passes from four
     logged 1000-step maps gave +0.18 to +0.25 dB. Colours that chase the current frame fit the other views
     worse; 5e-3 gave little more (+0.09 dB on the first tour, -0.02 dB on one map). In the closed loop
-    (benchmarks/results/apartment-1000-colour-lr, 8 pairs) full's held-out PSNR was 0.54 dB above the same pairs
+    (benchmarks/results/apartment-1000-colour-lr, 12 pairs) full's held-out PSNR was 0.46 dB above the same pairs
     at 2e-2, with other paths."""
     refine_passes: float = 3.0
     """Offline refinement after the step budget (DESIGN.md §5): this many passes over all keyframes, one Adam
