@@ -33,12 +33,31 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
+def logged_config(reader, mcap: Path):
+    """The run's :class:`~dynactivegs.config.Config` from the log opened in ``reader``."""
+    from dynactivegs.config import config_from_json
+    from dynactivegs.errors import DagsError
+
+    if reader.config_json is None:
+        raise DagsError(f"{mcap}: the log has no config; it was not written by dagsrun or dagsbench")
+    return config_from_json(reader.config_json)
+
+
+def chosen_map(reader, last_map, online: bool, mcap: Path):
+    """The map to measure: the log's refined map, or (``online``) ``last_map``, its last snapshot."""
+    from dynactivegs.errors import DagsError
+
+    g = last_map if online else reader.refined_map()
+    if g is None:
+        raise DagsError(f"{mcap}: no {'map snapshot' if online else 'refined map'} in the log"
+                        f"{'' if online else '; pass --online to use the last map snapshot'}")
+    return g
+
+
 def run_breakdown(mcap: Path, online: bool) -> tuple[str, list[dict[str, float]]]:
     """(a label, one breakdown per held-out view) of the run logged in ``mcap``."""
     import torch
 
-    from dynactivegs.config import config_from_json
-    from dynactivegs.errors import DagsError
     from dynactivegs.eval.config import EvalConfig
     from dynactivegs.eval.metrics import SceneEvaluator
     from dynactivegs.eval.rendering import psnr_db, psnr_split
@@ -47,18 +66,13 @@ def run_breakdown(mcap: Path, online: bool) -> tuple[str, list[dict[str, float]]
     from replay.source import LogReader
 
     reader = LogReader(mcap)
-    if reader.config_json is None:
-        raise DagsError(f"{mcap}: the log has no config; it was not written by dagsrun or dagsbench")
-    cfg = config_from_json(reader.config_json)
+    cfg = logged_config(reader, mcap)
     traj, last_map = [], None
     for st in reader.steps():
         traj.append((st["/truth"].robot.x_m, st["/truth"].robot.y_m))
         if MAP_TOPIC in st:
             last_map = st[MAP_TOPIC]
-    g = last_map if online else reader.refined_map()
-    if g is None:
-        raise DagsError(f"{mcap}: no {'map snapshot' if online else 'refined map'} in the log"
-                        f"{'' if online else '; pass --online to use the last map snapshot'}")
+    g = chosen_map(reader, last_map, online, mcap)
     ev = SceneEvaluator(cfg.sim, EvalConfig())
     poses, rgb, depth = ev.heldout(np.asarray(traj, np.float64))
     cam = cfg.sim.camera

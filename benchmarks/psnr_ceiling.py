@@ -30,6 +30,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from psnr_breakdown import chosen_map, logged_config  # noqa: E402  (the same reading of a run log)
 
 
 def static_psnr_db(pred_rgb: np.ndarray, true_rgb: np.ndarray, static: np.ndarray) -> float:
@@ -54,7 +57,6 @@ def run_ceiling(mcap: Path, online: bool, n_overfit: int, iters: int, factor: in
     :class:`~dynactivegs.eval.config.EvalConfig`) defaults to ``dagsbench``'s."""
     import torch
 
-    from dynactivegs.config import config_from_json
     from dynactivegs.errors import DagsError
     from dynactivegs.eval.config import EvalConfig
     from dynactivegs.eval.metrics import SceneEvaluator
@@ -65,9 +67,7 @@ def run_ceiling(mcap: Path, online: bool, n_overfit: int, iters: int, factor: in
     from replay.source import LogReader
 
     reader = LogReader(mcap)
-    if reader.config_json is None:
-        raise DagsError(f"{mcap}: the log has no config; it was not written by dagsrun or dagsbench")
-    cfg = config_from_json(reader.config_json)
+    cfg = logged_config(reader, mcap)
     traj, keyframes, static, last_map = [], [], [], None
     for st in reader.steps():
         truth = st["/truth"]
@@ -79,10 +79,7 @@ def run_ceiling(mcap: Path, online: bool, n_overfit: int, iters: int, factor: in
             static.append(~truth.people_mask)
         if MAP_TOPIC in st:
             last_map = st[MAP_TOPIC]
-    g = last_map if online else reader.refined_map()
-    if g is None:
-        raise DagsError(f"{mcap}: no {'map snapshot' if online else 'refined map'} in the log"
-                        f"{'' if online else '; pass --online to use the last map snapshot'}")
+    g = chosen_map(reader, last_map, online, mcap)
     if not keyframes:
         raise DagsError(f"{mcap}: the log has no keyframes")
     cam = cfg.sim.camera
