@@ -6,6 +6,8 @@
 - :func:`forward_blocked`: whether the next forward move would run into something seen in
   the current depth frame (people included, whatever their uncertainty): points in the body's
   height band inside the rectangle the robot's disc sweeps in one step (:func:`forward_hits`).
+- :func:`side_clearance`: the nearest return on each side of the robot, for turning away from
+  something it keeps bumping into.
 - :class:`StuckState` / :func:`update_stuck`: the robot has not left a small disc for k steps
   (blocked by a person in a doorway, turning back and forth), so the caller should pick
   another target.
@@ -201,6 +203,29 @@ def forward_blocked(depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray,
     must come from the occupancy map; this check catches walls and people.
     """
     return len(forward_hits(depth_m, K, T_world_cam, cfg, stride)) >= cfg.min_blocking_points
+
+
+def side_clearance(depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, cfg: ActionConfig,
+                   reach_m: float, stride: int = 1) -> tuple[float, float]:
+    """Distance (m) from the robot's centre to the nearest return on its left and on its right (inf: none).
+
+    Counted are returns in the body's height band within ``reach_m`` of the robot and not behind
+    it (ahead > -radius); a return straight ahead counts for both sides. The side with the larger
+    clearance is the one to turn toward when the robot keeps bumping into something.
+    """
+    pts, _ = backproject(depth_m, K, T_world_cam, stride)
+    fwd = T_world_cam[:2, 2].astype(np.float64)
+    norm = math.hypot(fwd[0], fwd[1])
+    assert norm > 1e-6, "camera looks straight up or down"
+    fwd = fwd / norm
+    rel = pts[:, :2] - T_world_cam[:2, 3]
+    ahead = rel @ fwd
+    side = rel @ np.array([-fwd[1], fwd[0]])
+    dist = np.hypot(ahead, side)
+    near = (pts[:, 2] >= cfg.band_lo_m) & (pts[:, 2] <= cfg.band_hi_m) & (ahead > -cfg.radius_m) & (dist <= reach_m)
+    left = dist[near & (side >= 0.0)]
+    right = dist[near & (side <= 0.0)]
+    return (float(left.min()) if len(left) else math.inf, float(right.min()) if len(right) else math.inf)
 
 
 @dataclass(frozen=True, slots=True)

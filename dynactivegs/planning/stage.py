@@ -26,6 +26,10 @@ Per step:
    the path is re-planned at once. If the next move is still a forward move into what the
    depth frame shows, the robot first turns to aim exactly at its waypoint, then waits (STOP)
    for the way to clear; a spot only remembered re-routes the path but never makes it wait.
+6. Turning away: after ``bump_evade_after`` bumps in a row without moving (something it cannot
+   see keeps stopping it, e.g. a person at the edge of the field of view), the robot turns by
+   ``evade_turn_deg`` toward the side with more room, tries one forward step unless the depth
+   frame shows something there, and re-plans.
 
 No dead-locks: ``PlanningOut.stuck`` reports the robot has not left a small disc for
 ``actions.stuck_steps`` steps with an unreached target; the selection stage applies the
@@ -42,7 +46,8 @@ import numpy as np
 
 from dynactivegs.errors import check_config
 from dynactivegs.fields.project import FloorMap, motion_floor_map, segment_means
-from dynactivegs.planning.actions import ActionConfig, StuckState, forward_blocked, is_stuck, next_action, update_stuck
+from dynactivegs.planning.actions import (ActionConfig, StuckState, forward_blocked, is_stuck, next_action,
+                                          side_clearance, update_stuck)
 from dynactivegs.planning.paths import PathConfig, dijkstra, ema_update, variant_edge_cost
 from dynactivegs.records import PlanningOut, SelectionOut, StepRecord, robot_pose_of
 from dynactivegs.selection.voronoi import GraphArrays, nearest_clear_node
@@ -77,6 +82,18 @@ class PlanningConfig:
     """A blocked spot is remembered for this many steps."""
     bump_tol_m: float = 0.05
     """A forward action after which the robot moved less than this was blocked (a bump)."""
+    bump_evade_after: int = 2
+    """After this many bumps in a row (the robot did not move in between; turns do not count as moving), the
+    robot turns away by evade_turn_deg, toward the side with more room, tries one forward step and re-plans.
+    The simulator keeps the robot 0.3 m off a person's centre, wider than their body, and a person standing at
+    the edge of the field of view is then missed by the depth check: with full on apartment-00, seed 0,
+    1000 steps, 71 of the run's 104 collisions came from one 74-step stand-off in which the robot tried the
+    same forward step every step. 0: never turn away, keep trying."""
+    evade_turn_deg: float = 60.0
+    """How far the robot turns away after bump_evade_after bumps in a row."""
+    evade_reach_m: float = 1.0
+    """The side with more room: the one whose nearest depth return (body height band) within this distance is
+    farther; with none on either side, the one with less U_m on the floor within this distance; else left."""
     source_radius_m: float = 1.0
     """The path may start at any node within this distance of the robot and three graph hops of the nearest
     node; the one with the cheapest path counting the way there and the turns (metres of forward steps a
@@ -94,6 +111,10 @@ class PlanningConfig:
         check_config(self.block_hold_steps >= 0, "planning.block_hold_steps", self.block_hold_steps, ">= 0")
         check_config(0.0 < self.bump_tol_m < self.actions.forward_step_m, "planning.bump_tol_m", self.bump_tol_m,
                      "in (0, actions.forward_step_m)")
+        check_config(self.bump_evade_after >= 0, "planning.bump_evade_after", self.bump_evade_after, ">= 0 (0: never)")
+        check_config(0.0 < self.evade_turn_deg <= 180.0, "planning.evade_turn_deg", self.evade_turn_deg,
+                     "in (0, 180] deg")
+        check_config(self.evade_reach_m > 0.0, "planning.evade_reach_m", self.evade_reach_m, "> 0 m")
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,6 +133,8 @@ class PlanningState:
     last_xy_m: tuple[float, float] | None
     last_action: int
     stuck: StuckState
+    bumps_in_row: int                    # bumps since the robot last moved
+    evade: tuple[int, ...]               # actions still to take turning away from a spot it kept bumping into
 
     def __post_init__(self) -> None:
         self.ema.flags.writeable = False
@@ -122,7 +145,7 @@ def init_state(cfg: PlanningConfig) -> PlanningState:
     """Step 0's state: no map average, no path."""
     assert isinstance(cfg, PlanningConfig)
     return PlanningState((0, 0), np.zeros((0, 0)), b"", None, np.zeros((0, 2)), math.nan, 0, -1, (), None,
-                         int(Action.STOP), StuckState())
+                         int(Action.STOP), StuckState(), 0, ())
 
 
 def _graph_key(sel: SelectionOut) -> bytes:
@@ -238,6 +261,27 @@ def _plan(cfg: PlanningConfig, sel: SelectionOut, now_map: FloorMap | None, ema_
     return wp.astype(np.float64), float(total)
 
 
+def _evade_turn(cfg: PlanningConfig, rec: StepRecord, now_map: FloorMap | None, robot_xy: np.ndarray,
+                yaw_rad: float) -> Action:
+    """The way to turn away from a spot the robot keeps bumping into: toward the side with more room."""
+    f = rec.frame
+    left, right = side_clearance(f.depth_m, f.K, f.T_world_cam, cfg.actions, cfg.evade_reach_m)
+    if left != right:
+        return Action.TURN_LEFT if left > right else Action.TURN_RIGHT
+    if now_map is not None:
+        r = np.arange(cfg.actions.radius_m, cfg.evade_reach_m + 1e-9, cfg.sample_spacing_m)
+        a = np.radians(np.arange(10.0, 171.0, 20.0))
+        rr, aa = np.meshgrid(r, a)
+        def side_sum(sign: float) -> float:
+            ang = yaw_rad + sign * aa
+            pts = robot_xy + np.stack([rr * np.cos(ang), rr * np.sin(ang)], axis=-1)
+            return float(now_map.sample(pts).sum())
+        um_left, um_right = side_sum(1.0), side_sum(-1.0)
+        if um_left != um_right:
+            return Action.TURN_LEFT if um_left < um_right else Action.TURN_RIGHT
+    return Action.TURN_LEFT
+
+
 def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
          rng: np.random.Generator) -> tuple[PlanningState, PlanningOut]:
     """Plan (or keep following) a path to the selected target and return the next discrete action.
@@ -268,6 +312,14 @@ def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
     ahead = robot_xy + fwd * (acfg.forward_step_m + acfg.radius_m)
     if bumped:
         blocks = blocks + ((float(ahead[0]), float(ahead[1]), now + cfg.block_hold_steps),)
+    moved = (state.last_xy_m is not None
+             and math.hypot(robot_xy[0] - state.last_xy_m[0], robot_xy[1] - state.last_xy_m[1]) >= cfg.bump_tol_m)
+    bumps_in_row = 0 if moved else state.bumps_in_row + int(bumped)
+    evade = state.evade
+    if cfg.bump_evade_after and bumps_in_row >= cfg.bump_evade_after and not evade:
+        turns = max(1, math.ceil(cfg.evade_turn_deg / acfg.turn_step_deg - 1e-9))
+        evade = (int(_evade_turn(cfg, rec, now_map, robot_xy, pose.yaw_rad)),) * turns + (int(Action.FORWARD),)
+        bumps_in_row = 0
 
     target_key = (float(sel.target_xy_m[0]), float(sel.target_xy_m[1]), float(sel.target_yaw_rad))
     gkey = _graph_key(sel)
@@ -277,7 +329,18 @@ def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
 
     path, cost, k, planned_step = state.path_xy_m, state.path_cost, state.next_waypoint, state.planned_step
     replanned = False
-    if sel.mode == "none" or sel.target_node < 0:
+    evading = False
+    if evade and sel.mode != "none" and sel.target_node >= 0:
+        # turning away from a spot it kept bumping into, then one step forward unless something is seen
+        # there; the path is dropped, so the step after the last of these re-plans
+        first, evade = Action(evade[0]), evade[1:]
+        if first != Action.FORWARD or not forward_blocked(f.depth_m, f.K, f.T_world_cam, acfg):
+            action, path, cost, k, blocked, evading = first, np.zeros((0, 2)), math.nan, 0, True, True
+    else:
+        evade = ()
+    if evading:
+        pass                                               # the turn-away chose the action
+    elif sel.mode == "none" or sel.target_node < 0:
         action, path, cost, k, blocked = Action.TURN_LEFT, np.zeros((0, 2)), math.nan, 0, False   # look around
     else:
         if (new_target or gkey != state.graph_key or bumped or len(path) == 0
@@ -316,7 +379,7 @@ def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
     stuck = is_stuck(stuck_state, acfg) and not reached
     new_state = PlanningState(ema_origin, ema, gkey, target_key, np.asarray(path, np.float64), float(cost), int(k),
                               int(planned_step), blocks, (float(robot_xy[0]), float(robot_xy[1])), int(action),
-                              stuck_state)
+                              stuck_state, int(bumps_in_row), tuple(int(a) for a in evade))
     out = PlanningOut(action=int(action), path_xy_m=np.concatenate([robot_xy[None], path[k:]]) if len(path) else
                       np.zeros((0, 2)), path_cost=float(cost), replanned=replanned, blocked=blocked, stuck=stuck)
     return new_state, out

@@ -10,7 +10,7 @@ import pytest
 from dynactivegs.config import RobotConfig
 from dynactivegs.errors import ConfigError
 from dynactivegs.planning.actions import (
-    ActionConfig, StuckState, forward_blocked, is_stuck, next_action, update_stuck,
+    ActionConfig, StuckState, forward_blocked, is_stuck, next_action, side_clearance, update_stuck,
 )
 from dynactivegs.records import RobotPose2D
 from dynactivegs.sim.robot import Action, apply_action, wrap_angle
@@ -96,6 +96,17 @@ def test_forward_is_blocked_by_a_near_wall_or_person_ahead_only():
     assert not blocked(1.0, 1.5, 0.0, [person])                      # 1.3 m ahead
     T = view(3.7, 1.5, 0.0)
     assert not forward_blocked(np.zeros((H, W), np.float32), K, T, CFG)   # no returns, nothing known to block
+
+
+def test_side_clearance_is_the_nearest_return_on_each_side():
+    T = view(2.0, 1.5, 0.0)                                          # facing +x, the room's far wall 2 m ahead
+    person = (2.2, 1.9, 2.5, 2.2, 1.75)                              # ahead on the left, its near corner 0.45 m away
+    depth, _ = render_depth(T, K, W, H, (4.0, 3.0), [person])
+    left, right = side_clearance(depth, K, T, CFG, reach_m=1.0)
+    assert 0.4 < left < 0.6 and right == math.inf                    # the walls 1.5 m to the sides are out of reach
+    left, right = side_clearance(depth, K, T, CFG, reach_m=3.0)
+    assert 0.4 < left < 0.6 and 1.4 < right < 2.2                    # the right wall's visible part, or the far wall
+    assert side_clearance(np.zeros((H, W), np.float32), K, T, CFG, 1.0) == (math.inf, math.inf)
 
 
 def test_stuck_after_k_steps_without_moving_reset_by_motion():

@@ -409,6 +409,57 @@ def test_a_seen_block_first_makes_the_robot_aim_exactly_then_wait():
     assert out.blocked and out.action == Action.STOP
 
 
+def _bump_in_place(cfg, sel, fo, mo, start, yaw, boxes=(), steps=10):
+    """Actions of a robot whose forward moves all fail (it stays at ``start``; turns turn it), with depth frames of
+    the 9 x 3 m room and ``boxes`` (none: blind frames); also each step's PlanningOut."""
+    state, actions, outs = planning.init_state(cfg), [], []
+    for t in range(steps):
+        T = view(start[0], start[1], yaw)
+        depth = render_depth(T, K, W, H, (9.0, 3.0), list(boxes))[0] if boxes else np.zeros((H, W), np.float32)
+        frame = Frame(t, t, np.zeros((H, W, 3), np.uint8), depth, K.copy(), T)
+        state, out = planning.step(cfg, StepRecord(frame=frame, fields=fo, selection=sel, mapping=mo), state,
+                                   derive_rng(0, "p", t))
+        actions.append(Action(out.action))
+        outs.append(out)
+        if out.action in (Action.TURN_LEFT, Action.TURN_RIGHT):
+            yaw = apply_action(RobotPose2D(start[0], start[1], yaw), Action(out.action), RobotConfig()).yaw_rad
+    return actions, outs
+
+
+def test_bumps_in_a_row_make_the_robot_turn_away_toward_the_side_with_more_room():
+    sel, fo, mo, cfg, start, yaw = _one_room_way_ahead()
+    F, L, R = Action.FORWARD, Action.TURN_LEFT, Action.TURN_RIGHT
+    turns = math.ceil(cfg.evade_turn_deg / cfg.actions.turn_step_deg)
+    # nothing seen, no U_m: two bumps, then a turn to the left, one step forward, and a fresh plan
+    actions, outs = _bump_in_place(cfg, sel, fo, mo, start, yaw, steps=4 + turns)
+    assert actions[:2] == [F, F] and actions[2:2 + turns] == [L] * turns and actions[2 + turns] == F
+    assert all(o.blocked and len(o.path_xy_m) == 0 for o in outs[2:3 + turns])
+    assert outs[3 + turns].replanned and actions[3 + turns] == R          # back toward the way to its target
+    # a person on the left that the camera sees (beside the swept rectangle): it turns right
+    person_left = (start[0] + 0.1, start[1] + 0.3, start[0] + 0.4, start[1] + 0.6, 1.75)
+    actions, _ = _bump_in_place(cfg, sel, fo, mo, start, yaw, [person_left], steps=3)
+    assert actions == [F, F, R]
+    person_right = (start[0] + 0.1, start[1] - 0.6, start[0] + 0.4, start[1] - 0.3, 1.75)
+    assert _bump_in_place(cfg, sel, fo, mo, start, yaw, [person_right], steps=3)[0] == [F, F, L]
+    # nothing seen, but U_m (people walked there) on the left: it turns right
+    busy, _ = fields_for(np.ones((60, 190), bool), [], [(start[0], start[1] + 0.3, start[0] + 0.8, start[1] + 0.9, 1.0)])
+    assert _bump_in_place(cfg, sel, busy, mo, start, yaw, steps=3)[0] == [F, F, R]
+    # turning away is off: it keeps trying the step
+    never = dataclasses.replace(cfg, bump_evade_after=0)
+    assert _bump_in_place(never, sel, fo, mo, start, yaw, steps=6)[0] == [F] * 6
+
+
+def test_the_evade_step_forward_is_dropped_when_something_is_seen_there():
+    sel, fo, mo, cfg, start, yaw = _one_room_way_ahead()
+    short = dataclasses.replace(cfg, evade_turn_deg=cfg.actions.turn_step_deg)      # one turn, then the step
+    # people on both sides, the nearer on the right; after the left turn the left one is right ahead
+    left = (start[0] + 0.25, start[1] + 0.2, start[0] + 0.55, start[1] + 0.5, 1.75)
+    right = (start[0] + 0.1, start[1] - 0.45, start[0] + 0.4, start[1] - 0.2, 1.75)
+    actions, outs = _bump_in_place(short, sel, fo, mo, start, yaw, [left, right], steps=4)
+    assert actions[:3] == [Action.FORWARD, Action.FORWARD, Action.TURN_LEFT]
+    assert actions[3] != Action.FORWARD and outs[3].replanned
+
+
 def test_space_beyond_the_fields_grid_counts_as_unobserved():
     # a 3 x 3 m grid, observed everywhere (U_s 0.2) but one unobserved voxel (U_s 1); the node is near its +x edge
     shape = (20, 20, 20)
