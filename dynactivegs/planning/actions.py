@@ -170,6 +170,21 @@ def next_action(pose: RobotPose2D, waypoints_xy_m: np.ndarray, target_yaw_rad: f
     return PathStep(Action.FORWARD if turn is None else turn, k)
 
 
+def _returns_around_robot(depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray,
+                          stride: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The depth returns in the robot's frame: height z, metres ahead, metres to the left, flat pixel index.
+
+    The camera is taken to sit above the robot's centre looking along its heading (the optical
+    axis projected to the floor)."""
+    pts, pix = backproject(depth_m, K, T_world_cam, stride)
+    fwd = T_world_cam[:2, 2].astype(np.float64)
+    norm = math.hypot(fwd[0], fwd[1])
+    assert norm > 1e-6, "camera looks straight up or down"
+    fwd = fwd / norm
+    rel = pts[:, :2] - T_world_cam[:2, 3]
+    return pts[:, 2], rel @ fwd, rel @ np.array([-fwd[1], fwd[0]]), pix
+
+
 def forward_hits(depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, cfg: ActionConfig,
                  stride: int = 1) -> np.ndarray:
     """int64 flat pixel indices (row-major into (H, W)) of the returns one forward step would hit.
@@ -179,16 +194,7 @@ def forward_hits(depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, cf
     Hits: height in ``[band_lo_m, band_hi_m]``, ahead by ``(0, forward_step + radius]``
     and at most ``radius`` to either side. ``depth_m`` float32 (H, W), 0 = no return.
     """
-    pts, pix = backproject(depth_m, K, T_world_cam, stride)
-    fwd = T_world_cam[:2, 2].astype(np.float64)
-    norm = math.hypot(fwd[0], fwd[1])
-    assert norm > 1e-6, "camera looks straight up or down"
-    fwd = fwd / norm
-    left = np.array([-fwd[1], fwd[0]])
-    rel = pts[:, :2] - T_world_cam[:2, 3]
-    ahead = rel @ fwd
-    side = rel @ left
-    z = pts[:, 2]
+    z, ahead, side, pix = _returns_around_robot(depth_m, K, T_world_cam, stride)
     hit = ((z >= cfg.band_lo_m) & (z <= cfg.band_hi_m) & (ahead > 0.0)
            & (ahead <= cfg.forward_step_m + cfg.radius_m) & (np.abs(side) <= cfg.radius_m))
     return pix[hit]
@@ -213,16 +219,9 @@ def side_clearance(depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, 
     it (ahead > -radius); a return straight ahead counts for both sides. The side with the larger
     clearance is the one to turn toward when the robot keeps bumping into something.
     """
-    pts, _ = backproject(depth_m, K, T_world_cam, stride)
-    fwd = T_world_cam[:2, 2].astype(np.float64)
-    norm = math.hypot(fwd[0], fwd[1])
-    assert norm > 1e-6, "camera looks straight up or down"
-    fwd = fwd / norm
-    rel = pts[:, :2] - T_world_cam[:2, 3]
-    ahead = rel @ fwd
-    side = rel @ np.array([-fwd[1], fwd[0]])
+    z, ahead, side, _ = _returns_around_robot(depth_m, K, T_world_cam, stride)
     dist = np.hypot(ahead, side)
-    near = (pts[:, 2] >= cfg.band_lo_m) & (pts[:, 2] <= cfg.band_hi_m) & (ahead > -cfg.radius_m) & (dist <= reach_m)
+    near = (z >= cfg.band_lo_m) & (z <= cfg.band_hi_m) & (ahead > -cfg.radius_m) & (dist <= reach_m)
     left = dist[near & (side >= 0.0)]
     right = dist[near & (side <= 0.0)]
     return (float(left.min()) if len(left) else math.inf, float(right.min()) if len(right) else math.inf)
