@@ -223,6 +223,9 @@ def test_bad_config_values_raise_config_error():
             selection.SelectionConfig(**kw)
     with pytest.raises(ConfigError):
         planning.PlanningConfig(replan_every=0)
+    for kw in ({"bump_evade_after": -1}, {"evade_turn_deg": 0.0}, {"evade_turn_deg": 270.0}, {"evade_reach_m": 0.0}):
+        with pytest.raises(ConfigError, match=f"planning.{next(iter(kw))}"):
+            planning.PlanningConfig(**kw)
     with pytest.raises(ConfigError):
         planning.PlanningConfig(path=PathConfig(variant="astar"))  # type: ignore[arg-type]
 
