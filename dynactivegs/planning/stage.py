@@ -312,14 +312,14 @@ def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
         ema_origin, ema, ema_map = state.ema_origin_ij, state.ema, None
 
     blocks = tuple(b for b in state.blocks if b[2] > now)
-    bumped = (state.last_action == int(Action.FORWARD) and state.last_xy_m is not None
-              and math.hypot(robot_xy[0] - state.last_xy_m[0], robot_xy[1] - state.last_xy_m[1]) < cfg.bump_tol_m)
+    step_m = (math.inf if state.last_xy_m is None
+              else math.hypot(robot_xy[0] - state.last_xy_m[0], robot_xy[1] - state.last_xy_m[1]))
+    bumped = state.last_action == int(Action.FORWARD) and step_m < cfg.bump_tol_m
     fwd = np.array([math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)])
     ahead = robot_xy + fwd * (acfg.forward_step_m + acfg.radius_m)
     if bumped:
         blocks = blocks + ((float(ahead[0]), float(ahead[1]), now + cfg.block_hold_steps),)
-    moved = (state.last_xy_m is not None
-             and math.hypot(robot_xy[0] - state.last_xy_m[0], robot_xy[1] - state.last_xy_m[1]) >= cfg.bump_tol_m)
+    moved = state.last_xy_m is not None and step_m >= cfg.bump_tol_m
     bumps_in_row = 0 if moved else state.bumps_in_row + int(bumped)
     evade = state.evade
     if cfg.bump_evade_after and bumps_in_row >= cfg.bump_evade_after and not evade:
