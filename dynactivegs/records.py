@@ -199,6 +199,9 @@ class SelectionOut:
     The graph's node ids are 0..N-1; ``edges`` lists (u, v) with u < v, sorted.
     ``mode`` is how the target was chosen: ``local``, ``global``, ``random``, ``frontier``,
     ``keep`` (the previous target still stands) or ``none`` (nothing left to explore).
+    ``local_clear_m`` is the known free space around the robot for the planner's last metre: each
+    cell's distance to the nearest occupied cell of the occupancy grid or kept bump disc (the
+    measure of ``node_leg_clear``), capped where obstacles farther out were not looked for.
     """
 
     target_xy_m: np.ndarray       # float64 (2,)
@@ -217,6 +220,9 @@ class SelectionOut:
     cand_risk: np.ndarray         # float64 (C,), R_m (eq. 9)
     cand_cost: np.ndarray         # float64 (C,), travel cost C(n)
     cand_score: np.ndarray        # float64 (C,), S_local (eq. 7)
+    local_clear_m: np.ndarray     # float32 (L, L), distance to the nearest known obstacle around the robot; (0, 0): none
+    local_origin_xy_m: np.ndarray  # float64 (2,), world xy of local_clear_m's lower-left corner
+    local_cell_m: float           # cell size of local_clear_m: cell [i, j] is centred at origin + ((j, i) + 0.5) * cell
 
     def __post_init__(self) -> None:
         n = self.node_xy_m.shape[0]
@@ -228,6 +234,8 @@ class SelectionOut:
                "SelectionOut.edges must be (E, 2) with edge_length_m (E,)")
         _check(all(a.shape == (c,) for a in (self.cand_yaw_rad, self.cand_gain, self.cand_risk, self.cand_cost,
                                              self.cand_score)), "SelectionOut candidate arrays must be (C,)")
+        _check(self.local_clear_m.ndim == 2 and self.local_clear_m.shape[0] == self.local_clear_m.shape[1]
+               and self.local_origin_xy_m.shape == (2,), "SelectionOut.local_clear_m must be (L, L), origin (2,)")
         _freeze_arrays(self)
 
 

@@ -51,13 +51,15 @@ import numpy as np
 from dynactivegs import records
 from dynactivegs.errors import DagsError
 
-SCHEMA_VERSION = 4
+SCHEMA_VERSION = 5
 """Version of the message encoding and of the record layouts. Bump it when a record's fields change.
 
 2: ``/fields`` may hold a :func:`encode_fields_delta` message (``_t`` ``FieldsDelta``).
 3: a ``FieldsDelta`` may also follow a grid that grew (the previous grid placed inside the new one).
 4: ``SelectionOut`` gains ``node_leg_clear``; older messages read with every node's way clear (what
-   the planner then assumed)."""
+   the planner then assumed).
+5: ``SelectionOut`` gains ``local_clear_m``, ``local_origin_xy_m`` and ``local_cell_m``; older messages
+   read with an empty window (the planner then steers by its path alone, as it did)."""
 
 MIN_SCHEMA_VERSION = 1
 """Oldest schema version this code still reads."""
@@ -288,17 +290,24 @@ def decode(data: bytes | memoryview, cls: type[T] | None = None) -> T:
     found = RECORD_TYPES.get(name)
     if found is None:
         raise _corrupt(f"message holds an unknown record type {name!r}")
-    if int(m["_v"]) < 4:
+    if int(m["_v"]) < 5:
         _upgrade_selection(m.get("selection") if name == "StepRecord" else m if name == "SelectionOut" else None)
     return _build(found, m, name, skip=("_t", "_v"))
 
 
 def _upgrade_selection(m: object) -> None:
-    """A ``SelectionOut`` map of schema version < 4 given ``node_leg_clear``: every node clear."""
-    if isinstance(m, dict) and "node_leg_clear" not in m and isinstance(m.get("node_xy_m"), dict):
+    """A ``SelectionOut`` map of an older schema version given the fields it lacks: ``node_leg_clear`` (< 4)
+    with every node clear, the local window (< 5) empty."""
+    if not isinstance(m, dict):
+        return
+    if "node_leg_clear" not in m and isinstance(m.get("node_xy_m"), dict):
         shape = m["node_xy_m"].get("shape")
         n = shape[0] if isinstance(shape, list) and shape else 0
         m["node_leg_clear"] = _pack_array(np.ones(n, np.bool_))
+    if "local_clear_m" not in m:
+        m["local_clear_m"] = _pack_array(np.zeros((0, 0), np.float32))
+        m["local_origin_xy_m"] = _pack_array(np.zeros(2, np.float64))
+        m["local_cell_m"] = 0.0
 
 
 # ------------------------------------------------------------------------------ state snapshots

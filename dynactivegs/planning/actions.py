@@ -8,6 +8,9 @@
   height band inside the rectangle the robot's disc sweeps in one step (:func:`forward_hits`).
 - :func:`side_clearance`: the nearest return on each side of the robot, for turning away from
   something it keeps bumping into.
+- :func:`steer_clear`: where the known obstacles around the robot (the selection's
+  ``local_clear_m``) say the aimed forward step would graze one, the nearest heading toward
+  the waypoint whose step keeps clear (:func:`clear_headings`).
 - :class:`StuckState` / :func:`update_stuck`: the robot has not left a small disc for k steps
   (blocked by a person in a doorway, turning back and forth), so the caller should pick
   another target.
@@ -21,6 +24,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from dynactivegs.sim.config import RobotConfig
 from dynactivegs.errors import check_config
@@ -59,6 +63,13 @@ class ActionConfig:
     turn_commit_deg: float = 120.0
     """A turn in progress is kept for heading errors above this the other way (the far side of a bearing
     behind the robot); 180 never keeps it."""
+    steer_search_deg: float = 45.0
+    """:func:`steer_clear` looks for a heading whose forward step keeps clear of the known obstacles within this
+    of the waypoint's bearing; 0: never (the robot steers by its path alone). In a passage a few centimetres
+    wider than the robot, a step at up to forward_tol_deg off grazes a wall the exact heading clears."""
+    clear_margin_m: float = 0.02
+    """A forward step keeps clear when the robot's edge stays this far from the known obstacles along it (or,
+    where it stands nearer already, gets no nearer)."""
     stuck_steps: int = 40
     """Steps without leaving a disc of stuck_move_tol_m after which the robot is stuck (above a full turn of steps)."""
     stuck_move_tol_m: float = 0.1
@@ -78,6 +89,9 @@ class ActionConfig:
                      "in [0, 180] deg")
         check_config(0.0 <= self.band_lo_m < self.band_hi_m, "actions.band_lo_m", self.band_lo_m, "in [0, band_hi_m)")
         check_config(self.min_blocking_points >= 1, "actions.min_blocking_points", self.min_blocking_points, ">= 1")
+        check_config(0.0 <= self.steer_search_deg <= 90.0, "actions.steer_search_deg", self.steer_search_deg,
+                     "in [0, 90] deg (0: off)")
+        check_config(0.0 <= self.clear_margin_m <= 0.5, "actions.clear_margin_m", self.clear_margin_m, "in [0, 0.5] m")
         check_config(self.stuck_steps >= 1, "actions.stuck_steps", self.stuck_steps, ">= 1")
         check_config(0.0 < self.stuck_move_tol_m < self.forward_step_m, "actions.stuck_move_tol_m", self.stuck_move_tol_m,
                  "in (0, forward_step_m)")
@@ -96,6 +110,7 @@ class PathStep:
 
     action: Action
     next_waypoint: int            # index of the first waypoint not yet reached (== len(waypoints) when all are)
+    aim_rad: float | None = None  # bearing of the waypoint aimed at; None when turning to the target's heading
 
 
 def _turn_toward(err_rad: float, half_step_rad: float, prefer: Action | None = None,
@@ -167,7 +182,7 @@ def next_action(pose: RobotPose2D, waypoints_xy_m: np.ndarray, target_yaw_rad: f
     bearing = math.atan2(wp[k_aim, 1] - pose.y_m, wp[k_aim, 0] - pose.x_m)
     go = max(half, math.radians(cfg.forward_tol_deg))
     turn = _turn_toward(wrap_angle(bearing - pose.yaw_rad), go, prefer_turn, commit)
-    return PathStep(Action.FORWARD if turn is None else turn, k)
+    return PathStep(Action.FORWARD if turn is None else turn, k, bearing)
 
 
 def _returns_around_robot(depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray,
@@ -225,6 +240,99 @@ def side_clearance(depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, 
     left = dist[near & (side >= 0.0)]
     right = dist[near & (side <= 0.0)]
     return (float(left.min()) if len(left) else math.inf, float(right.min()) if len(right) else math.inf)
+
+
+_SQUEEZE_GAIN_M = 0.01
+"""A squeezed robot turns to a step that keeps at least this much farther from the obstacles (:func:`steer_clear`)."""
+
+
+def _step_distances(clear_m: np.ndarray, origin_xy_m: np.ndarray, cell_m: float, pose: RobotPose2D,
+                    yaws: np.ndarray, cfg: ActionConfig) -> np.ndarray:
+    """float64 (len(yaws), n + 1): the window's distance (bilinear) along one forward step per heading, sampled
+    every half cell from the robot's position (column 0); inf off the window."""
+    n = max(2, int(math.ceil(cfg.forward_step_m / (0.5 * cell_m))))
+    t = np.arange(n + 1) / n * cfg.forward_step_m                        # metres along the step, 0 = here
+    xy = np.array([pose.x_m, pose.y_m]) + t[None, :, None] * np.stack([np.cos(yaws), np.sin(yaws)], -1)[:, None, :]
+    col = (xy[..., 0] - origin_xy_m[0]) / cell_m - 0.5
+    row = (xy[..., 1] - origin_xy_m[1]) / cell_m - 0.5
+    size = clear_m.shape[0]
+    d = ndimage.map_coordinates(clear_m.astype(np.float64), [row.ravel(), col.ravel()], order=1,
+                                mode="nearest").reshape(row.shape)
+    d[(row < -0.5) | (row > size - 0.5) | (col < -0.5) | (col > size - 0.5)] = np.inf
+    return d
+
+
+def _clear(d: np.ndarray, cell_m: float, cfg: ActionConfig) -> np.ndarray:
+    """bool per row of :func:`_step_distances`: the step keeps clear (:func:`clear_headings`)."""
+    # below radius + margin, a sample may not fall more than a quarter cell (bilinear noise) under the largest
+    # distance before it: a step that leaves one obstacle for another nearer one is not clear either
+    peak = np.maximum.accumulate(d, axis=1)[:, :-1]
+    need = np.minimum(cfg.radius_m + cfg.clear_margin_m, peak - 0.25 * cell_m)
+    return np.all(d[:, 1:] >= need, axis=1)
+
+
+def clear_headings(clear_m: np.ndarray, origin_xy_m: np.ndarray, cell_m: float, pose: RobotPose2D,
+                   yaws_rad: np.ndarray, cfg: ActionConfig) -> np.ndarray:
+    """bool per heading in ``yaws_rad``: whether one forward step from the robot's position keeps clear of the known
+    obstacles of the window ``clear_m`` (float32 (L, L), distance to the nearest obstacle, cell ``[i, j]`` centred
+    at ``origin + ((j, i) + 0.5) * cell``).
+
+    Along the step, sampled every half cell, the distance (bilinear) must stay at least
+    ``radius + clear_margin_m``; where it is below that (the robot stands nearer already), it may not
+    fall by more than a quarter cell under the largest distance earlier on the step: the robot may
+    move along an obstacle or away from it, not into it, nor away from one into another.
+    Samples off the window count as clear."""
+    yaws = np.asarray(yaws_rad, np.float64).reshape(-1)
+    if clear_m.size == 0:
+        return np.ones(len(yaws), bool)
+    return _clear(_step_distances(clear_m, origin_xy_m, cell_m, pose, yaws, cfg), cell_m, cfg)
+
+
+def steer_clear(pose: RobotPose2D, step: PathStep, clear_m: np.ndarray, origin_xy_m: np.ndarray, cell_m: float,
+                cfg: ActionConfig) -> Action:
+    """The action of ``step`` (from :func:`next_action`), or a turn toward a heading whose step keeps clear.
+
+    Applies when the robot goes for a waypoint (``step.aim_rad`` set, a forward step or a turn toward it)
+    within ``cfg.steer_search_deg`` of its heading. Among the headings a whole number of turn steps away
+    and within ``steer_search_deg`` of the bearing, those whose forward step keeps clear of the known
+    obstacles (:func:`clear_headings`) are candidates; the robot steps forward on the nearest (in turn steps)
+    candidate within ``forward_tol_deg`` of the bearing, else on the candidate nearest the bearing, and turns
+    toward it first. A robot squeezed already (nearer than ``radius + clear_margin_m`` to an obstacle of the
+    window) takes, of the candidates within ``forward_tol_deg``, the nearest in turns whose step keeps within
+    a centimetre as far from the obstacles as the best one (the smallest distance along the step): the map
+    is a few centimetres off the world, and a step that drifts closer within the map's noise can still
+    graze; a centimetre's gain is worth a turn step, less is not (in a passage barely wider than that
+    the robot would zig-zag from side to side). With every heading clear this is what :func:`next_action` does; with none, the action
+    stays (the depth check and the bump rule deal with it).
+    """
+    if (step.aim_rad is None or clear_m.size == 0 or cfg.steer_search_deg <= 0.0
+            or step.action not in (Action.FORWARD, Action.TURN_LEFT, Action.TURN_RIGHT)):
+        return step.action
+    turn = math.radians(cfg.turn_step_deg)
+    search = math.radians(cfg.steer_search_deg)
+    err0 = wrap_angle(step.aim_rad - pose.yaw_rad)
+    if abs(err0) > search + 1e-9:
+        return step.action
+    js = np.arange(math.ceil((err0 - search) / turn - 1e-9), math.floor((err0 + search) / turn + 1e-9) + 1)
+    err = np.abs(err0 - js * turn)
+    d = _step_distances(clear_m, origin_xy_m, cell_m, pose, pose.yaw_rad + js * turn, cfg)
+    ok = _clear(d, cell_m, cfg)
+    if not ok.any():
+        return step.action
+    aligned = ok & (err <= max(0.5 * turn, math.radians(cfg.forward_tol_deg)) + 1e-9)
+    pool = np.nonzero(aligned if aligned.any() else ok)[0]
+    if aligned.any() and d[0, 0] < cfg.radius_m + cfg.clear_margin_m:
+        # squeezed (nearer than radius + margin to something): of the aligned steps that keep within a
+        # centimetre as far from it as the best one, the nearest in turns
+        low = d[pool, 1:].min(axis=1)
+        pool = pool[low >= low.max() - _SQUEEZE_GAIN_M]
+        key = (np.abs(js[pool]), -low[low >= low.max() - _SQUEEZE_GAIN_M])
+    elif aligned.any():
+        key = (np.abs(js[pool]), err[pool])
+    else:
+        key = (err[pool], np.abs(js[pool]))
+    j = int(js[pool[np.lexsort(key[::-1])[0]]])
+    return Action.FORWARD if j == 0 else Action.TURN_LEFT if j > 0 else Action.TURN_RIGHT
 
 
 @dataclass(frozen=True, slots=True)

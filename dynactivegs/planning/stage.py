@@ -20,6 +20,9 @@ Per step:
    path.
 4. The next discrete action (:func:`dynactivegs.planning.actions.next_action`): turn toward
    the next waypoint, forward when aligned, final turn to the target yaw, STOP at the target.
+   Where the selection's map of the obstacles around the robot (``SelectionOut.local_clear_m``)
+   says the aimed step would graze one, the robot steers to the nearest heading toward the
+   waypoint whose step keeps clear (:func:`dynactivegs.planning.actions.steer_clear`).
 5. Local collision check: a forward move that the current depth frame says would hit
    something (:func:`~dynactivegs.planning.actions.forward_blocked`), or a forward move at
    the previous step that did not move the robot (a bump), blocks: the spot is penalised,
@@ -46,10 +49,10 @@ import numpy as np
 
 from dynactivegs.errors import check_config
 from dynactivegs.fields.project import FloorMap, motion_floor_map, segment_means
-from dynactivegs.planning.actions import (ActionConfig, StuckState, forward_blocked, is_stuck, next_action,
-                                          side_clearance, update_stuck)
+from dynactivegs.planning.actions import (ActionConfig, PathStep, StuckState, forward_blocked, is_stuck, next_action,
+                                          side_clearance, steer_clear, update_stuck)
 from dynactivegs.planning.paths import PathConfig, dijkstra, ema_update, variant_edge_cost
-from dynactivegs.records import PlanningOut, SelectionOut, StepRecord, robot_pose_of
+from dynactivegs.records import PlanningOut, RobotPose2D, SelectionOut, StepRecord, robot_pose_of
 from dynactivegs.selection.voronoi import GraphArrays, nearest_clear_node
 from dynactivegs.sim.robot import Action, wrap_angle
 
@@ -267,6 +270,11 @@ def _plan(cfg: PlanningConfig, sel: SelectionOut, now_map: FloorMap | None, ema_
     return wp.astype(np.float64), float(total)
 
 
+def _steer(pose: RobotPose2D, ps: PathStep, sel: SelectionOut, acfg: ActionConfig) -> Action:
+    """``ps``'s action, or a turn toward a heading whose step keeps clear of the known obstacles around the robot."""
+    return steer_clear(pose, ps, sel.local_clear_m, sel.local_origin_xy_m, sel.local_cell_m, acfg)
+
+
 def _evade_turn(cfg: PlanningConfig, rec: StepRecord, now_map: FloorMap | None, robot_xy: np.ndarray,
                 yaw_rad: float) -> Action:
     """The way to turn away from a spot the robot keeps bumping into: toward the side with more room."""
@@ -356,7 +364,7 @@ def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
         prefer = Action(state.last_action) if state.last_action in (int(Action.TURN_LEFT), int(Action.TURN_RIGHT)) \
             else None
         ps = next_action(pose, path[k:], sel.target_yaw_rad, acfg, prefer)
-        action, k = ps.action, k + ps.next_waypoint
+        action, k = _steer(pose, ps, sel, acfg), k + ps.next_waypoint
         blocked = False
         seen_block = action == Action.FORWARD and forward_blocked(f.depth_m, f.K, f.T_world_cam, acfg)
         if action == Action.FORWARD and (seen_block or _block_ahead(blocks, robot_xy, fwd, acfg)):
@@ -368,7 +376,7 @@ def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
             path, cost = _plan(cfg, sel, now_map, ema_map, blocks, robot_xy, pose.yaw_rad)
             k, planned_step, replanned = 0, now, True
             ps = next_action(pose, path, sel.target_yaw_rad, acfg, prefer)
-            action, k = ps.action, ps.next_waypoint
+            action, k = _steer(pose, ps, sel, acfg), ps.next_waypoint
             if action == Action.FORWARD and seen_block:
                 # Still forward into what the camera sees. First aim exactly (a step at up to
                 # forward_tol_deg off can graze a door jamb the aligned step clears), then wait.

@@ -197,6 +197,12 @@ class SelectionConfig:
     lay straight across the box: it bumped 86 times in a row (full, apartment-00, seed 2, 1000 steps: 64.5 %
     C.R. and 159 collisions; with the check 93.7 % and 31)."""
 
+    local_window_m: float = 0.6
+    """``SelectionOut.local_clear_m`` covers the square this far from the robot's cell in x and y, and obstacles
+    up to as far again beyond it are looked for (distances are capped there). The planner checks its next
+    forward step against it; the step's end lies 0.25 m away and the robot's edge 0.18 m further. 0: no
+    window (the planner steers by its path alone)."""
+
     def __post_init__(self) -> None:
         check_config(self.variant in SELECTION_VARIANTS, "selection.variant", self.variant,
                      f"one of {SELECTION_VARIANTS}")
@@ -224,6 +230,8 @@ class SelectionConfig:
         check_config(self.bump_near_m >= 0.0, "selection.bump_near_m", self.bump_near_m, ">= 0 m (0: off)")
         check_config(self.bump_hold_steps >= 0, "selection.bump_hold_steps", self.bump_hold_steps, ">= 0")
         check_config(self.bump_give_up >= 0, "selection.bump_give_up", self.bump_give_up, ">= 0 (0: never)")
+        check_config(0.0 <= self.local_window_m <= 5.0, "selection.local_window_m", self.local_window_m,
+                     "in [0, 5] m (0: none)")
 
 
 @dataclass(frozen=True, slots=True)
@@ -474,6 +482,35 @@ def _leg_clear(cfg: SelectionConfig, grid: OccupancyGrid, robot_xy: np.ndarray, 
     return ~low
 
 
+def _local_clearance(cfg: SelectionConfig, grid: OccupancyGrid, robot_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The known free space around the robot (``SelectionConfig.local_window_m``): float32 (L, L) distance (m)
+    from each cell centre to the nearest occupied cell's edge, as :func:`_leg_clear` measures it, and the world
+    xy of the window's lower-left corner. Obstacles are looked for up to ``local_window_m`` beyond the window;
+    distances are capped there. Cells outside the grid count as free (unknown, like in the leg check)."""
+    cell = grid.cell_m
+    half = int(math.ceil(cfg.local_window_m / cell - 1e-9))
+    if half == 0 or 0 in grid.shape:
+        return np.zeros((0, 0), np.float32), np.zeros(2)
+    size = 2 * half + 1
+    c = grid.world_to_cell(robot_xy[None])[0]
+    lo = c - 2 * half                                   # the crop: the window plus as much again on every side
+    occ = grid.occupied(cfg.occupancy)
+    crop = np.zeros((4 * half + 1, 4 * half + 1), bool)
+    h, w = grid.shape
+    r0, r1 = max(lo[0], 0), min(lo[0] + crop.shape[0], h)
+    c0, c1 = max(lo[1], 0), min(lo[1] + crop.shape[1], w)
+    if r0 < r1 and c0 < c1:
+        crop[r0 - lo[0]:r1 - lo[0], c0 - lo[1]:c1 - lo[1]] = occ[r0:r1, c0:c1]
+    cap = half * cell
+    if crop.any():
+        dist = np.minimum(ndimage.distance_transform_edt(~crop) * cell - 0.5 * cell, cap)
+    else:
+        dist = np.full(crop.shape, cap)
+    window = dist[half:half + size, half:half + size].astype(np.float32)
+    corner = grid.cell_to_world(c - half) - 0.5 * cell
+    return window, corner
+
+
 # ---------------------------------------------------------------------------------------------- choosing
 def _robot_node(cfg: SelectionConfig, marked: OccupancyGrid, robot_xy: np.ndarray,
                 G: nx.Graph) -> tuple[np.ndarray, np.ndarray, int]:
@@ -721,6 +758,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
     else:
         t_xy, t_yaw, t_node = np.array(target.xy_m, np.float64), float(target.yaw_rad), int(target_node)
     n = len(xy_nodes)
+    local_clear, local_origin = _local_clearance(cfg, marked, robot_xy)
     out = SelectionOut(
         target_xy_m=t_xy, target_yaw_rad=t_yaw, target_node=t_node, mode=mode,
         node_xy_m=xy_nodes.copy(),
@@ -730,5 +768,6 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
         frontier=np.array([bool(G.nodes[i]["frontier"]) for i in range(n)], bool), node_leg_clear=leg_clear,
         cand_node=show.node.copy(), cand_yaw_rad=show.yaw_rad.copy(), cand_gain=show.gain.copy(),
         cand_risk=show.risk.copy(), cand_cost=show.cost.copy(), cand_score=show.score.copy(),
+        local_clear_m=local_clear, local_origin_xy_m=local_origin, local_cell_m=float(marked.cell_m),
     )
     return new_state, out

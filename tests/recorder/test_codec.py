@@ -238,11 +238,28 @@ def test_tensors_move_to_the_requested_device():
 def test_a_selection_of_schema_version_3_reads_with_every_way_clear():
     sel = next(r for r in all_record_types() if type(r).__name__ == "SelectionOut")
     m = msgpack.unpackb(encode(sel))
-    m.pop("node_leg_clear")
+    for k in ("node_leg_clear", "local_clear_m", "local_origin_xy_m", "local_cell_m"):
+        m.pop(k)
     m["_v"] = 3
     old = decode(msgpack.packb(m))
     assert old.node_leg_clear.dtype == np.bool_ and old.node_leg_clear.all()
     assert old.node_leg_clear.shape == (len(sel.node_xy_m),) and np.array_equal(old.node_xy_m, sel.node_xy_m)
-    m["_v"] = 4                                       # the current version must have it
-    with pytest.raises(DagsError, match="missing \\['node_leg_clear'\\]"):
+    m["_v"] = SCHEMA_VERSION                          # the current version must have it
+    with pytest.raises(DagsError, match="missing \\['local_cell_m', 'local_clear_m', 'local_origin_xy_m', 'node_leg_clear'\\]"):
+        decode(msgpack.packb(m))
+
+
+def test_a_selection_of_schema_version_4_reads_with_an_empty_local_window():
+    sel = next(r for r in all_record_types() if type(r).__name__ == "SelectionOut")
+    assert sel.local_clear_m.size > 0
+    m = msgpack.unpackb(encode(sel))
+    for k in ("local_clear_m", "local_origin_xy_m", "local_cell_m"):
+        m.pop(k)
+    m["_v"] = 4
+    old = decode(msgpack.packb(m))
+    assert old.local_clear_m.shape == (0, 0) and old.local_clear_m.dtype == np.float32
+    assert old.local_origin_xy_m.shape == (2,) and old.local_cell_m == 0.0
+    assert np.array_equal(old.node_leg_clear, sel.node_leg_clear)
+    m["_v"] = SCHEMA_VERSION
+    with pytest.raises(DagsError, match="missing \\['local_cell_m', 'local_clear_m', 'local_origin_xy_m'\\]"):
         decode(msgpack.packb(m))

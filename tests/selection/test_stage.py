@@ -144,7 +144,7 @@ def _selection_out_from_graph(G, target_xy) -> SelectionOut:
     z = np.zeros(0)
     return SelectionOut(node_xy(G)[t].copy(), 0.0, t, "local", node_xy(G), np.stack([a.u, a.v], 1).astype(np.int32),
                         a.length_m.copy(), np.zeros(n, np.int32), np.zeros(n, bool), np.ones(n, bool), np.zeros(0, np.int32),
-                        z, z, z, z, z)
+                        z, z, z, z, z, np.zeros((0, 0), np.float32), np.zeros(2), 0.0)
 
 
 def test_dyn_edge_planner_detours_around_a_busy_corridor_that_shortest_goes_through():
@@ -286,6 +286,26 @@ def test_a_remembered_block_reroutes_but_never_makes_the_robot_wait():
                      mapping=mo)
     state, out = planning.step(cfg, rec, state, derive_rng(0, "p", 1))
     assert len(state.blocks) == 2 and state.blocks[-1][2] == 1 + cfg.block_hold_steps
+
+
+def test_the_planner_turns_to_a_heading_whose_step_keeps_clear_of_a_wall_beside_it():
+    sel, fo, mo, cfg, start, yaw = _one_room_way_ahead()
+    # a wall (known to the selection's grid, unseen by the camera) 0.225 m left of the robot, along its way
+    left = np.array([-math.sin(yaw), math.cos(yaw)])
+    origin = start - 0.6
+    X, Y = np.meshgrid(origin[0] + (np.arange(24) + 0.5) * 0.05, origin[1] + (np.arange(24) + 0.5) * 0.05)
+    d = 0.225 - ((np.stack([X, Y], -1) - start) @ left)      # distance to the wall line
+    walled = dataclasses.replace(sel, local_clear_m=np.maximum(d, 0.0).astype(np.float32), local_origin_xy_m=origin,
+                                 local_cell_m=0.05)
+    heading = yaw + math.radians(11.0)                        # within forward_tol_deg, toward the wall
+
+    def first_action(s):
+        rec = StepRecord(frame=blind_frame(float(start[0]), float(start[1]), heading), fields=fo, selection=s,
+                         mapping=mo)
+        return planning.step(cfg, rec, planning.init_state(cfg), derive_rng(0, "p", 0))[1].action
+
+    assert first_action(sel) == Action.FORWARD                # no window: the path alone
+    assert first_action(walled) == Action.TURN_RIGHT          # away from the wall, to 1 deg off the way
 
 
 def test_a_bump_stays_in_the_grid_under_rays_passing_high_over_it():
@@ -527,6 +547,33 @@ def test_a_way_straight_across_an_obstacle_is_not_clear():
     assert selection._leg_clear(cfg, grid, robot, np.array([along, away, into])).tolist() == [True, True, False]
     assert nearest_clear_node(np.array([into, away]), robot, np.array([False, True])) == 1     # the nearest clear
     assert nearest_clear_node(np.array([into, away]), robot, np.array([False, False])) == 0    # else the nearest
+
+
+def test_the_local_window_is_the_distance_to_the_grids_obstacles_around_the_robot():
+    from scipy import ndimage
+    cfg = selection.SelectionConfig()
+    occupied = np.zeros((60, 80), bool)
+    fill(occupied, 0.0, 0.0, 4.0, 0.2)                       # a wall along the bottom
+    fill(occupied, 2.0, 1.4, 2.1, 1.5)                       # a post
+    grid = OccupancyGrid((0, 0), CELL, np.where(occupied, 1.0, -1.0).astype(np.float32))
+    full = np.minimum(ndimage.distance_transform_edt(~occupied) * CELL - 0.5 * CELL, cfg.local_window_m)
+    for robot in ([1.52, 0.61], [2.3, 1.2], [0.1, 2.9]):     # the last one near two edges of the grid
+        clear, origin = selection._local_clearance(cfg, grid, np.array(robot))
+        assert clear.shape == (25, 25) and clear.dtype == np.float32
+        ij = grid.world_to_cell(np.array(robot))
+        assert np.allclose(origin, grid.cell_to_world(ij - 12) - 0.5 * CELL)
+        rows = np.arange(ij[0] - 12, ij[0] + 13)
+        cols = np.arange(ij[1] - 12, ij[1] + 13)
+        inside = (rows[:, None] >= 0) & (rows[:, None] < 60) & (cols[None, :] >= 0) & (cols[None, :] < 80)
+        want = full[np.clip(rows, 0, 59)[:, None], np.clip(cols, 0, 79)[None, :]]
+        assert np.allclose(clear[inside], want[inside], atol=1e-6)
+    clear, _ = selection._local_clearance(cfg, grid, np.array([1.52, 0.61]))
+    assert clear[12, 12] == pytest.approx(0.425)             # the robot's cell centre (y 0.625) above the wall's top
+    # a bump disc counts like an obstacle; no window when turned off
+    marked = selection._mark_bump(cfg, grid, np.array([1.52, 1.0]))
+    assert selection._local_clearance(cfg, marked, np.array([1.52, 0.61]))[0][12, 12] < 0.2
+    off = dataclasses.replace(cfg, local_window_m=0.0)
+    assert selection._local_clearance(off, grid, np.array([1.52, 0.61]))[0].shape == (0, 0)
 
 
 def test_a_bump_disc_never_covers_the_robot_and_its_node_is_one_it_can_drive_to():
