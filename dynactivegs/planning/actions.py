@@ -66,7 +66,13 @@ class ActionConfig:
     steer_search_deg: float = 45.0
     """:func:`steer_clear` looks for a heading whose forward step keeps clear of the known obstacles within this
     of the waypoint's bearing; 0: never (the robot steers by its path alone). In a passage a few centimetres
-    wider than the robot, a step at up to forward_tol_deg off grazes a wall the exact heading clears."""
+    wider than the robot, a step at up to forward_tol_deg off grazes a wall the exact heading clears: full on
+    apartment-03, seed 0, 1000 steps, spent 581 of steps 332-930 in one such passage, bumping at its ends and
+    re-targeting to the other end after each bump (75.0 % C.R.); with steering it passed through in 24 steps
+    (92.1 %). Measured closed-loop (benchmarks/results/apartment-1000-steer: full, 4 apartment scenes, seeds
+    0 and 1, against the same 8 runs without it): collisions with no person within 1 m fell from 39 to 5, all
+    collisions from 31.9 to 23.0 per run, and the mean went from 3.95 cm / 86.7 % / 22.73 dB to
+    2.87 / 92.0 / 23.96."""
     clear_margin_m: float = 0.02
     """A forward step keeps clear when the robot's edge stays this far from the known obstacles along it (or,
     where it stands nearer already, gets no nearer)."""
