@@ -308,8 +308,9 @@ def steer_clear(pose: RobotPose2D, step: PathStep, clear_m: np.ndarray, origin_x
     a centimetre as far from the obstacles as the best one (the smallest distance along the step): the map
     is a few centimetres off the world, and a step that drifts closer within the map's noise can still
     graze; a centimetre's gain is worth a turn step, less is not (in a passage barely wider than that
-    the robot would zig-zag from side to side). With every heading clear this is what :func:`next_action` does; with none, the action
-    stays (the depth check and the bump rule deal with it).
+    the robot would zig-zag from side to side). With every heading clear this is what
+    :func:`next_action` does; with none, the action stays (the depth check and the bump rule deal
+    with it).
     """
     if (step.aim_rad is None or clear_m.size == 0 or cfg.steer_search_deg <= 0.0
             or step.action not in (Action.FORWARD, Action.TURN_LEFT, Action.TURN_RIGHT)):
@@ -331,8 +332,8 @@ def steer_clear(pose: RobotPose2D, step: PathStep, clear_m: np.ndarray, origin_x
         # squeezed (nearer than radius + margin to something): of the aligned steps that keep within a
         # centimetre as far from it as the best one, the nearest in turns
         low = d[pool, 1:].min(axis=1)
-        pool = pool[low >= low.max() - _SQUEEZE_GAIN_M]
-        key = (np.abs(js[pool]), -low[low >= low.max() - _SQUEEZE_GAIN_M])
+        near_best = low >= low.max() - _SQUEEZE_GAIN_M
+        pool, key = pool[near_best], (np.abs(js[pool[near_best]]), -low[near_best])
     elif aligned.any():
         key = (np.abs(js[pool]), err[pool])
     else:
