@@ -46,9 +46,9 @@ class MappingConfig:
     """A new Gaussian's standard deviation is this times the footprint of densify_stride pixels at its depth."""
     max_gaussians: int = 100_000
     """Cap on the map's size; densification stops there. A memory guard, not a resolution: at 60 000, baseline
-    maps of 1000-step apartment runs hit it by step 500 and the rooms explored later got no Gaussians
-    (apartment-01/03 seed 0: Acc 3.31/3.43 cm at 60 000, 2.55/2.44 at 100 000, with 81-86k Gaussians and no
-    slower steps); full's maps stopped at 62k either way (benchmarks/results/apartment-1000-cap)."""
+    maps of 1000-step apartment runs hit it by step 500 in 5 of 8 runs and the rooms explored later got no
+    Gaussians (apartment-01/03 seed 0: Acc 3.31/3.43 cm at 60 000, 2.55/2.44 at 100 000, with 81-86k Gaussians
+    and no slower steps); full's maps ended below 63k either way (benchmarks/results/apartment-1000-cap)."""
     keyframe_every: int = 3
     """Every k-th frame becomes a keyframe."""
     window: int = 6
