@@ -12,7 +12,8 @@ Per step t (``step``), given frame t, its pose and beta_t from perception:
    at 160 x 92 a full footprint is 5 cm at 2 m, and the map's walls come out as thick as that
    (measured on a 600-step run of apartment-00: half the footprint took Acc from 5.5 to
    4.1 cm). With weighting on, pixels whose beta exceeds ``seed_beta_ratio`` times the frame's
-   reference beta never seed Gaussians. Additions stop at ``max_gaussians``.
+   reference beta (2 by default, see MappingConfig) never seed Gaussians. Additions stop at
+   ``max_gaussians``.
 3. **Keyframe**: every ``keyframe_every``-th frame joins the keyframe set, with its beta.
 4. **Optimise** ``iters`` Adam steps of the paper's mapping loss on views drawn from the
    current frame (every other iteration), the last ``window`` keyframes and
