@@ -78,8 +78,8 @@ class ActionConfig:
     where it stands nearer already, gets no nearer)."""
     stuck_steps: int = 40
     """Steps without leaving a disc of stuck_move_tol_m after which the robot is stuck (above a full turn of steps)."""
-    stuck_move_tol_m: float = 0.1
-    """Radius of the disc the robot must leave to count as moving."""
+    stuck_move_tol_m: float = 0.3
+    """Radius of the disc the robot must leave to count as moving (match selection.stuck_move_tol_m)."""
 
     def __post_init__(self) -> None:
         check_config(0.01 <= self.forward_step_m <= 2.0, "actions.forward_step_m", self.forward_step_m, "in [0.01, 2] m")
@@ -99,8 +99,7 @@ class ActionConfig:
                      "in [0, 90] deg (0: off)")
         check_config(0.0 <= self.clear_margin_m <= 0.5, "actions.clear_margin_m", self.clear_margin_m, "in [0, 0.5] m")
         check_config(self.stuck_steps >= 1, "actions.stuck_steps", self.stuck_steps, ">= 1")
-        check_config(0.0 < self.stuck_move_tol_m < self.forward_step_m, "actions.stuck_move_tol_m", self.stuck_move_tol_m,
-                 "in (0, forward_step_m)")
+        check_config(self.stuck_move_tol_m > 0.0, "actions.stuck_move_tol_m", self.stuck_move_tol_m, "> 0 m")
 
     @staticmethod
     def for_robot(robot: RobotConfig) -> "ActionConfig":

@@ -130,8 +130,9 @@ class SelectionConfig:
     """A kept target follows the nearest node of a rebuilt graph if one is within this distance; else it is unreachable."""
     stuck_steps: int = 40
     """Steps without leaving a disc of stuck_move_tol_m, with an unreached target, after which the target is given up."""
-    stuck_move_tol_m: float = 0.1
-    """Radius of the disc the robot must leave to count as making progress."""
+    stuck_move_tol_m: float = 0.3
+    """Radius of the disc the robot must leave to count as making progress: above one forward step, so a robot
+    that steps aside from someone standing in its way and back (planning.wait_evade_after) is still stuck."""
     target_timeout_steps: int = 250
     """A target not reached after this many steps is given up."""
     ban_steps: int = 100

@@ -118,7 +118,10 @@ def test_stuck_after_k_steps_without_moving_reset_by_motion():
         assert not is_stuck(s, cfg)
     s = update_stuck(s, 1.02, 1.0, cfg)                             # jitter inside the tolerance
     assert is_stuck(s, cfg)
-    s = update_stuck(s, 1.25, 1.0, cfg)                             # a real step forward
+    s = update_stuck(s, 1.25, 1.0, cfg)                             # one step aside and back is no progress
+    s = update_stuck(s, 1.0, 1.0, cfg)
+    assert is_stuck(s, cfg)
+    s = update_stuck(s, 1.5, 1.0, cfg)                              # two steps forward are
     assert not is_stuck(s, cfg) and s.steps_still == 0
 
 

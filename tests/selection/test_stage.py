@@ -223,7 +223,7 @@ def test_bad_config_values_raise_config_error():
             selection.SelectionConfig(**kw)
     with pytest.raises(ConfigError):
         planning.PlanningConfig(replan_every=0)
-    for kw in ({"bump_evade_after": -1}, {"evade_turn_deg": 0.0}, {"evade_turn_deg": 270.0}, {"evade_reach_m": 0.0}):
+    for kw in ({"bump_evade_after": -1}, {"wait_evade_after": -1}, {"evade_turn_deg": 0.0}, {"evade_turn_deg": 270.0}, {"evade_reach_m": 0.0}):
         with pytest.raises(ConfigError, match=f"planning.{next(iter(kw))}"):
             planning.PlanningConfig(**kw)
     with pytest.raises(ConfigError):
@@ -286,6 +286,40 @@ def test_a_remembered_block_reroutes_but_never_makes_the_robot_wait():
                      mapping=mo)
     state, out = planning.step(cfg, rec, state, derive_rng(0, "p", 1))
     assert len(state.blocks) == 2 and state.blocks[-1][2] == 1 + cfg.block_hold_steps
+
+
+def _stand_off(cfg: planning.PlanningConfig, steps: int) -> list[int]:
+    """The planner's actions with a person standing still in the way 0.6 m ahead of the robot (the one room)."""
+    sel, fo, mo, _, start, yaw = _one_room_way_ahead()
+    c = start + 0.6 * np.array([math.cos(yaw), math.sin(yaw)])
+    person = (c[0] - 0.15, c[1] - 0.15, c[0] + 0.15, c[1] + 0.15, 1.8)
+    pose, state, actions = RobotPose2D(float(start[0]), float(start[1]), yaw), planning.init_state(cfg), []
+    for t in range(steps):
+        T = view(pose.x_m, pose.y_m, pose.yaw_rad)
+        depth = render_depth(T, K, W, H, (9.0, 3.0), [person])[0]
+        rec = StepRecord(frame=Frame(t, t, np.zeros((H, W, 3), np.uint8), depth, K.copy(), T), fields=fo,
+                         selection=sel, mapping=mo)
+        state, out = planning.step(cfg, rec, state, derive_rng(0, "p", t))
+        actions.append(out.action)
+        nxt = apply_action(pose, Action(out.action), RobotConfig())
+        x0, y0, x1, y1, _ = person
+        if not (x0 - 0.18 < nxt.x_m < x1 + 0.18 and y0 - 0.18 < nxt.y_m < y1 + 0.18):
+            pose = nxt
+    return actions
+
+
+def test_a_robot_waiting_for_someone_who_stays_in_the_way_turns_away():
+    cfg = planning.PlanningConfig(path=PathConfig(variant="shortest"))
+    acts = _stand_off(cfg, 20)
+    first_wait = acts.index(Action.STOP)
+    # it waits wait_evade_after steps for the way to clear, then turns away toward the free side
+    assert acts[first_wait:first_wait + cfg.wait_evade_after] == [Action.STOP] * cfg.wait_evade_after
+    assert acts[first_wait + cfg.wait_evade_after] in (Action.TURN_LEFT, Action.TURN_RIGHT)
+    assert Action.FORWARD in acts[first_wait + cfg.wait_evade_after:]     # and steps aside
+    # with the limit off it waits as long as the person stands there
+    never = dataclasses.replace(cfg, wait_evade_after=0)
+    acts = _stand_off(never, 20)
+    assert acts[acts.index(Action.STOP):] == [Action.STOP] * (20 - acts.index(Action.STOP))
 
 
 def test_the_planner_turns_to_a_heading_whose_step_keeps_clear_of_a_wall_beside_it():
@@ -472,15 +506,26 @@ def test_bumps_in_a_row_make_the_robot_turn_away_toward_the_side_with_more_room(
     assert _bump_in_place(never, sel, fo, mo, start, yaw, steps=6)[0] == [F] * 6
 
 
-def test_the_evade_step_forward_is_dropped_when_something_is_seen_there():
+def test_the_evade_step_is_taken_only_where_nothing_is_seen():
     sel, fo, mo, cfg, start, yaw = _one_room_way_ahead()
     short = dataclasses.replace(cfg, evade_turn_deg=cfg.actions.turn_step_deg)      # one turn, then the step
     # people on both sides, the nearer on the right; after the left turn the left one is right ahead
     left = (start[0] + 0.25, start[1] + 0.2, start[0] + 0.55, start[1] + 0.5, 1.75)
     right = (start[0] + 0.1, start[1] - 0.45, start[0] + 0.4, start[1] - 0.2, 1.75)
-    actions, outs = _bump_in_place(short, sel, fo, mo, start, yaw, [left, right], steps=4)
-    assert actions[:3] == [Action.FORWARD, Action.FORWARD, Action.TURN_LEFT]
-    assert actions[3] != Action.FORWARD and outs[3].replanned
+    actions, outs = _bump_in_place(short, sel, fo, mo, start, yaw, [left, right], steps=14)
+    F, L = Action.FORWARD, Action.TURN_LEFT
+    assert actions[:3] == [F, F, L]
+    # the step is seen blocked: it turns on, step by step, until its step is clear of the person (80 deg)
+    assert actions[3:11] == [L] * 7 + [F]
+    assert all(o.blocked and not o.replanned for o in outs[3:11])
+    assert outs[11].replanned                                          # then it plans afresh
+    # no half turn without a clear step: a robot boxed in on all sides gives the manoeuvre up and waits
+    boxed = [(start[0] + 0.25, start[1] - 1.0, start[0] + 0.6, start[1] + 1.0, 1.75),
+             (start[0] - 0.6, start[1] - 1.0, start[0] - 0.25, start[1] + 1.0, 1.75),
+             (start[0] - 1.0, start[1] + 0.25, start[0] + 1.0, start[1] + 0.6, 1.75),
+             (start[0] - 1.0, start[1] - 0.6, start[0] + 1.0, start[1] - 0.25, 1.75)]
+    actions, outs = _bump_in_place(short, sel, fo, mo, start, yaw, boxed, steps=24)
+    assert actions.count(F) == 0
 
 
 def test_space_beyond_the_fields_grid_counts_as_unobserved():
