@@ -141,9 +141,15 @@ def refine_map(cfg: DagsConfig, states: list[object],
                progress: Callable[[int], None] | None = None) -> list[object]:
     """The stage states with the map after the offline refinement over all keyframes (DESIGN.md §5,
     ``mapping.refine_passes`` passes; :func:`dynactivegs.mapping.stage.refine`). Its random order comes
-    from the seed alone. ``progress(k)`` is called after each Adam step."""
-    iters = mapping_stage.refine_iters(cfg.mapping, states[1])
-    m_state = mapping_stage.refine(cfg.mapping, states[1], iters, derive_rng(cfg.seed, "refine"), progress)
+    from the seed alone. ``progress(k)`` is called after each Adam step. With ``mapping.refine_beta=final``
+    the keyframes' beta is first predicted again by the perception state's MLP."""
+    m_state = states[1]
+    if cfg.mapping.weighted and cfg.mapping.refine_beta == "final":
+        m_state = replace(m_state, keyframes=tuple(
+            replace(kf, beta=perception_stage.predict_beta(cfg.perception, states[0], kf.rgb, kf.depth_m.shape))
+            for kf in m_state.keyframes))
+    iters = mapping_stage.refine_iters(cfg.mapping, m_state)
+    m_state = mapping_stage.refine(cfg.mapping, m_state, iters, derive_rng(cfg.seed, "refine"), progress)
     return [states[0], m_state, *states[2:]]
 
 

@@ -99,6 +99,11 @@ class MappingConfig:
     refine_passes: float = 3.0
     """Offline refinement after the step budget (DESIGN.md §5): this many passes over all keyframes, one Adam
     step per keyframe per pass (:func:`dynactivegs.mapping.stage.refine_iters`); 0: none."""
+    refine_beta: str = "logged"
+    """The beta that weights a keyframe in the offline refinement (with ``weighted``): ``logged``, the one
+    perception gave it when it was taken, or ``final``, the one the uncertainty MLP predicts for it after the
+    last step. A static surface seen for the first time has a high logged beta (the map did not fit it yet);
+    the final MLP, trained on residuals against the finished map, keeps a high beta for people only."""
     device: str = "cpu"
     """cpu (the numba rasterizer) or cuda (gsplat; needs the [cuda] extra)."""
 
@@ -133,6 +138,7 @@ class MappingConfig:
         for name in ("lr_means", "lr_log_scales", "lr_quats", "lr_opacity", "lr_sh0"):
             c(getattr(self, name) > 0, f"mapping.{name}", getattr(self, name), "> 0")
         c(0 <= self.refine_passes <= 100, "mapping.refine_passes", self.refine_passes, "in [0, 100] (0: no refinement)")
+        c(self.refine_beta in ("logged", "final"), "mapping.refine_beta", self.refine_beta, "logged or final")
         c(self.device in ("cpu", "cuda"), "mapping.device", self.device, "cpu or cuda")
 
     @property

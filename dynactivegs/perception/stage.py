@@ -66,6 +66,16 @@ def step(cfg: PerceptionConfig, rec: StepRecord, state: PerceptionState,
         trained = not np.isnan(loss)
     # rounded to half precision (11 significant bits, 0.05 %): what is logged is exactly what the
     # later stages read, and the cleared low mantissa bits halve the compressed log
-    beta = predict(cfg.uncertainty, mlp, feats, frame.depth_m.shape).astype(np.float16).astype(np.float32)
+    beta = _half(predict(cfg.uncertainty, mlp, feats, frame.depth_m.shape))
     new_state = PerceptionState(mlp, state.extractor_seed, feats, frame.rgb, frame.depth_m)
     return new_state, PerceptionOut(beta=beta, loss=loss, trained=trained)
+
+
+def _half(beta: np.ndarray) -> np.ndarray:
+    return beta.astype(np.float16).astype(np.float32)
+
+
+def predict_beta(cfg: PerceptionConfig, state: PerceptionState, rgb: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """beta (float32 ``shape``) of an image under the state's MLP, as :func:`step` would give it now (no training)."""
+    feats = extractor_for(cfg.features, state.extractor_seed)(rgb)
+    return _half(predict(cfg.uncertainty, state.mlp, feats, shape))

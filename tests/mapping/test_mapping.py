@@ -175,6 +175,35 @@ def test_refinement_lowers_the_loss_over_all_keyframes():
     assert mapping.refine_iters(mapping.MappingConfig(refine_passes=0), ms) == 0
 
 
+def test_refinement_with_the_final_mlp_weights_keyframes_by_beta_predicted_after_the_last_step(monkeypatch):
+    from dynactivegs import pipeline
+    from dynactivegs.config import preset, with_overrides
+    from dynactivegs.perception.stage import predict_beta
+
+    cfg = with_overrides(preset("full"), ["sim.scene=tiny-00", "sim.camera.width_px=48", "sim.camera.height_px=28",
+                                          "mapping.refine_beta=final"])
+    states = pipeline.run(cfg, 7).states
+    seen = {}
+
+    def capture(c, state, iters, rng, progress=None):
+        seen["kfs"] = state.keyframes
+        return state
+    monkeypatch.setattr(mapping, "refine", capture)
+    pipeline.refine_map(cfg, states)
+    logged = states[1].keyframes
+    assert len(seen["kfs"]) == len(logged) == 3
+    for kf, old in zip(seen["kfs"], logged):
+        assert np.array_equal(kf.beta, predict_beta(cfg.perception, states[0], old.rgb, old.depth_m.shape))
+        assert np.array_equal(kf.rgb, old.rgb) and kf.step == old.step
+    # the first keyframe was taken before the MLP had trained: its logged beta differs from the final one
+    assert not np.array_equal(seen["kfs"][0].beta, logged[0].beta)
+    # logged (the default): the keyframes as they were taken
+    pipeline.refine_map(with_overrides(cfg, ["mapping.refine_beta=logged"]), states)
+    assert seen["kfs"] is logged
+    with pytest.raises(ConfigError, match="mapping.refine_beta"):
+        mapping.MappingConfig(refine_beta="latest")
+
+
 def _digest(outs, ms) -> list[bytes]:
     parts = []
     for po, mo in outs:

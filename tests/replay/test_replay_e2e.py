@@ -89,6 +89,16 @@ def test_what_if_refinement_reports_its_map_size(recorded, capsys):
     assert f"Gaussians after the refinement: {len(reader.refined_map())} logged, {n_last} replayed" in out, out
 
 
+def test_refinement_with_the_final_mlp_is_re_run_only_with_perception(tmp_path, capsys):
+    log = tmp_path / "final.mcap"
+    assert dagsrun([*SMALL, "--record", str(log), "--out", str(tmp_path), "--set", "mapping.refine_beta=final"]) == 0
+    rc, out, err = replay(capsys, log, "--from-stage", "perception")
+    assert rc == 0 and "identical to the log" in out and "/map_refined (the refinement re-run" in out, out + err
+    # from mapping on, the perception stage's final MLP is not there: the logged refined map is kept as it is
+    rc, out, err = replay(capsys, log, "--from-stage", "mapping")
+    assert rc == 0 and "identical to the log" in out and "/map_refined" not in out, out + err
+
+
 def test_replay_from_a_later_step_fast_forwards(recorded, capsys):
     rc, out, err = replay(capsys, recorded["log"], "--from-stage", "mapping", "--from-step", "5", "--to-step", "6")
     assert rc == 0, out + err
