@@ -104,6 +104,10 @@ class MappingConfig:
     perception gave it when it was taken, or ``final``, the one the uncertainty MLP predicts for it after the
     last step. A static surface seen for the first time has a high logged beta (the map did not fit it yet);
     the final MLP, trained on residuals against the finished map, keeps a high beta for people only."""
+    refine_densify: bool = False
+    """Before the refinement's Adam passes, each keyframe in turn adds Gaussians where the map leaves a hole
+    in its view or lies behind what it saw (the online densification, step 2, with the keyframe's beta as
+    refine_beta says): surfaces glimpsed only while their beta was high never seeded online."""
     device: str = "cpu"
     """cpu (the numba rasterizer) or cuda (gsplat; needs the [cuda] extra)."""
 

@@ -288,6 +288,24 @@ def surface_voxels(cfg: MappingConfig, g: Gaussians) -> np.ndarray:
     return np.unique(ijk, axis=0) if len(ijk) else np.zeros((0, 3), np.int32)
 
 
+def densify(cfg: MappingConfig, g: Gaussians, adam: AdamState, view: Keyframe, render_depth_m: np.ndarray,
+            render_alpha: np.ndarray, rng: np.random.Generator) -> tuple[Gaussians, AdamState, int]:
+    """Adds Gaussians at ``view``'s :func:`seed_mask` pixels (step 2 of the module docstring), ``render_*`` being
+    the map's render at that view; past ``max_gaussians`` a random subset (from ``rng``) fills the room left."""
+    seeds = seed_mask(cfg, view.depth_m, view.beta, render_depth_m, render_alpha)
+    new = Gaussians.from_rgbd(view.rgb, view.depth_m, view.K, view.T_world_cam, mask=seeds,
+                              stride=cfg.densify_stride, opacity=cfg.init_opacity,
+                              scale_factor=cfg.init_scale).to(device=cfg.device)
+    room = max(cfg.max_gaussians - len(g), 0)
+    if len(new) > room:
+        keep = np.zeros(len(new), bool)
+        keep[rng.choice(len(new), size=room, replace=False)] = True
+        new = new.masked(torch.from_numpy(keep).to(cfg.device))
+    if len(new):
+        g, adam = Gaussians.cat([g, new]), adam.cat(new)
+    return g, adam, len(new)
+
+
 def _views(cfg: MappingConfig, current: Keyframe, keyframes: tuple[Keyframe, ...],
            rng: np.random.Generator) -> list[Keyframe]:
     """The views of this step's iterations: the current frame every other iteration, else keyframes."""
@@ -316,20 +334,9 @@ def step(cfg: MappingConfig, rec: StepRecord, state: MappingState,
 
     r_rgb, r_depth, r_alpha = render_view(cfg, g, frame.K, frame.T_world_cam, w, h)     # 1. G_{t-1} at pose t
 
-    seeds = seed_mask(cfg, frame.depth_m, beta, r_depth, r_alpha)                       # 2. densify
-    new = Gaussians.from_rgbd(frame.rgb, frame.depth_m, frame.K, frame.T_world_cam, mask=seeds,
-                              stride=cfg.densify_stride, opacity=cfg.init_opacity,
-                              scale_factor=cfg.init_scale).to(device=cfg.device)
-    room = max(cfg.max_gaussians - len(g), 0)
-    if len(new) > room:
-        keep = np.zeros(len(new), bool)
-        keep[rng.choice(len(new), size=room, replace=False)] = True
-        new = new.masked(torch.from_numpy(keep).to(cfg.device))
-    n_added = len(new)
-    if n_added:
-        g, adam = Gaussians.cat([g, new]), adam.cat(new)
-
     current = Keyframe(frame.step, frame.rgb, frame.depth_m, beta, frame.K, frame.T_world_cam)
+    g, adam, n_added = densify(cfg, g, adam, current, r_depth, r_alpha, rng)            # 2. densify
+
     is_key = state.steps % cfg.keyframe_every == 0                                      # 3. keyframes
     keyframes = state.keyframes
     g, adam, loss = optimise(cfg, g, adam, _views(cfg, current, keyframes, rng))       # 4. optimise
@@ -358,10 +365,17 @@ def refine_iters(cfg: MappingConfig, state: MappingState) -> int:
 def refine(cfg: MappingConfig, state: MappingState, iters: int, rng: np.random.Generator,
            progress: Callable[[int], None] | None = None) -> MappingState:
     """Offline refinement after the episode: ``iters`` Adam steps over all keyframes (random order,
-    each keyframe once per pass), then a final prune. ``progress(k)`` is called after each step."""
+    each keyframe once per pass), then a final prune. ``progress(k)`` is called after each step.
+    With ``refine_densify`` the keyframes first fill the map's holes, one after the other in the
+    order they were taken (:func:`densify` on the map's render at each)."""
     g, adam, kfs = state.gaussians, state.adam, state.keyframes
     if not kfs or iters <= 0 or len(g) == 0:
         return state
+    if cfg.refine_densify:
+        for kf in kfs:
+            h, w = kf.depth_m.shape
+            _, r_depth, r_alpha = render_view(cfg, g, kf.K, kf.T_world_cam, w, h)
+            g, adam, _ = densify(cfg, g, adam, kf, r_depth, r_alpha, rng)
     order: list[int] = []
     while len(order) < iters:
         order += [int(i) for i in rng.permutation(len(kfs))]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import numba
 import pytest
@@ -173,6 +175,29 @@ def test_refinement_lowers_the_loss_over_all_keyframes():
     # the run's refinement: refine_passes passes over the keyframes
     assert mapping.refine_iters(cfg, ms) == 9 and mapping.refine_iters(mapping.MappingConfig(refine_passes=0.5), ms) == 2
     assert mapping.refine_iters(mapping.MappingConfig(refine_passes=0), ms) == 0
+
+
+def test_refinement_densification_fills_a_hole_the_keyframes_see():
+    cfg = mapping.MappingConfig()
+    ms, _ = _run(9, cfg)
+    g = ms.gaussians
+    kf = ms.keyframes[0]
+    h, w = kf.depth_m.shape
+    # cut a hole: the Gaussians whose centres fall in the left half of the first keyframe
+    idx, _, ui, _ = mapping.project_centres(g.means.detach().double().numpy(), kf.K, kf.T_world_cam, w, h)
+    keep = np.ones(len(g), bool)
+    keep[idx[ui < w // 2]] = False
+    holed = mapping.MappingState(g.masked(torch.from_numpy(keep)), ms.adam.masked(torch.from_numpy(keep)),
+                                 ms.keyframes, ms.steps)
+
+    def cover(state):
+        alpha = mapping.render_view(cfg, state.gaussians, kf.K, kf.T_world_cam, w, h)[2]
+        return float((alpha[:, : w // 2][kf.depth_m[:, : w // 2] > 0] > 0.5).mean())
+
+    plain = mapping.refine(cfg, holed, 1, derive_rng(0, "refine"))
+    filled = mapping.refine(dataclasses.replace(cfg, refine_densify=True), holed, 1, derive_rng(0, "refine"))
+    assert cover(holed) < 0.5 and cover(plain) < 0.5
+    assert cover(filled) > 0.9 and len(filled.gaussians) > len(plain.gaussians)
 
 
 def test_refinement_with_the_final_mlp_weights_keyframes_by_beta_predicted_after_the_last_step(monkeypatch):
