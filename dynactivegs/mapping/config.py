@@ -103,11 +103,16 @@ class MappingConfig:
     """The beta that weights a keyframe in the offline refinement (with ``weighted``): ``logged``, the one
     perception gave it when it was taken, or ``final``, the one the uncertainty MLP predicts for it after the
     last step. A static surface seen for the first time has a high logged beta (the map did not fit it yet);
-    the final MLP, trained on residuals against the finished map, keeps a high beta for people only."""
+    the final MLP, trained on residuals against the finished map, keeps a high beta for people only.
+    Measured on one run's final state (full, apartment-02, seed 1, 1000 steps; Acc cm / C.R. % / PSNR dB of
+    the refined map): logged 2.81 / 90.46 / 21.89, final 2.90 / 89.91 / 21.89. Not a gain: logged stays."""
     refine_densify: bool = False
     """Before the refinement's Adam passes, each keyframe in turn adds Gaussians where the map leaves a hole
     in its view or lies behind what it saw (the online densification, step 2, with the keyframe's beta as
-    refine_beta says): surfaces glimpsed only while their beta was high never seeded online."""
+    refine_beta says): surfaces glimpsed only while their beta was high never seeded online. Measured on the
+    run of refine_beta's note: 65.7k -> 72.4k Gaussians, 2.90 / 90.30 / 21.89 (with refine_beta=final: 74.4k,
+    3.02 / 90.09 / 22.01), against 2.81 / 90.46 / 21.89 without: the holes' share of the PSNR error fell from
+    15.2 to 14.4 % but Acc got worse. Off."""
     device: str = "cpu"
     """cpu (the numba rasterizer) or cuda (gsplat; needs the [cuda] extra)."""
 
