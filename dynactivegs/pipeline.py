@@ -137,6 +137,11 @@ def run(cfg: DagsConfig, steps: int, *, sink: StepSink | None = None, refine: bo
     return RunResult(states, steps, np.asarray(traj, np.float64).reshape(-1, 2), elapsed / steps, collisions)
 
 
+def refine_reads_perception(cfg: DagsConfig) -> bool:
+    """Whether :func:`refine_map` reads the perception state (its MLP predicts the keyframes' beta again)."""
+    return cfg.mapping.weighted and cfg.mapping.refine_beta == "final"
+
+
 def refine_map(cfg: DagsConfig, states: list[object],
                progress: Callable[[int], None] | None = None) -> list[object]:
     """The stage states with the map after the offline refinement over all keyframes (DESIGN.md §5,
@@ -144,7 +149,7 @@ def refine_map(cfg: DagsConfig, states: list[object],
     from the seed alone. ``progress(k)`` is called after each Adam step. With ``mapping.refine_beta=final``
     the keyframes' beta is first predicted again by the perception state's MLP."""
     m_state = states[1]
-    if cfg.mapping.weighted and cfg.mapping.refine_beta == "final":
+    if refine_reads_perception(cfg):
         m_state = replace(m_state, keyframes=tuple(
             replace(kf, beta=perception_stage.predict_beta(cfg.perception, states[0], kf.rgb, kf.depth_m.shape))
             for kf in m_state.keyframes))

@@ -313,18 +313,18 @@ def _replay_refinement(cfg: DagsConfig, reader: LogReader, states: list[object],
                        last_step: int, progress: bool) -> tuple[Difference | None, bool]:
     """The offline refinement after the last step, when the log has its map (``/map_refined``).
 
-    With mapping re-run (and perception, for ``mapping.refine_beta=final``), the refinement is re-run from the replayed map and keyframes and its
-    map compared with the logged one, parameter by parameter (or, in a what-if run, its size
-    reported); with mapping taken from the log, the logged refined map is copied to a new log.
+    With mapping re-run (and perception, where the refinement reads it: ``mapping.refine_beta=final``),
+    the refinement is re-run from the replayed map and keyframes and its map compared with the logged
+    one, parameter by parameter (or, in a what-if run, its size reported); otherwise the logged
+    refined map is copied to a new log.
     Returns the first difference and whether the refined maps were compared and matched.
     """
     logged = reader.refined_map()
     if logged is None:
         return None, False
-    # with mapping.refine_beta=final the refinement also needs the perception stage's final MLP,
-    # which only a replay that re-runs perception has
-    needs_perception = cfg.mapping.weighted and cfg.mapping.refine_beta == "final"
-    if first_stage > 1 or (first_stage == 1 and needs_perception):
+    # a refinement that reads the perception state needs its final MLP, which only a replay that
+    # re-runs perception has
+    if first_stage > 1 or (first_stage == 1 and pipeline.refine_reads_perception(cfg)):
         if writer is not None:
             writer.write_refined_map(logged, last_stamp_ns + 1)
         return None, False

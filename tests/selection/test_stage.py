@@ -223,7 +223,8 @@ def test_bad_config_values_raise_config_error():
             selection.SelectionConfig(**kw)
     with pytest.raises(ConfigError):
         planning.PlanningConfig(replan_every=0)
-    for kw in ({"bump_evade_after": -1}, {"wait_evade_after": -1}, {"evade_turn_deg": 0.0}, {"evade_turn_deg": 270.0}, {"evade_reach_m": 0.0}):
+    for kw in ({"bump_evade_after": -1}, {"wait_evade_after": -1}, {"evade_turn_deg": 0.0}, {"evade_turn_deg": 270.0},
+               {"evade_reach_m": 0.0}):
         with pytest.raises(ConfigError, match=f"planning.{next(iter(kw))}"):
             planning.PlanningConfig(**kw)
     with pytest.raises(ConfigError):
@@ -519,7 +520,7 @@ def test_the_evade_step_is_taken_only_where_nothing_is_seen():
     assert actions[3:11] == [L] * 7 + [F]
     assert all(o.blocked and not o.replanned for o in outs[3:11])
     assert outs[11].replanned                                          # then it plans afresh
-    # no half turn without a clear step: a robot boxed in on all sides gives the manoeuvre up and waits
+    # a robot boxed in on all sides finds no clear step at any heading and never steps forward
     boxed = [(start[0] + 0.25, start[1] - 1.0, start[0] + 0.6, start[1] + 1.0, 1.75),
              (start[0] - 0.6, start[1] - 1.0, start[0] - 0.25, start[1] + 1.0, 1.75),
              (start[0] - 1.0, start[1] + 0.25, start[0] + 1.0, start[1] + 0.6, 1.75),
