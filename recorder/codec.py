@@ -51,7 +51,7 @@ import numpy as np
 from dynactivegs import records
 from dynactivegs.errors import DagsError
 
-SCHEMA_VERSION = 5
+SCHEMA_VERSION = 6
 """Version of the message encoding and of the record layouts. Bump it when a record's fields change.
 
 2: ``/fields`` may hold a :func:`encode_fields_delta` message (``_t`` ``FieldsDelta``).
@@ -59,7 +59,8 @@ SCHEMA_VERSION = 5
 4: ``SelectionOut`` gains ``node_leg_clear``; older messages read with every node's way clear (what
    the planner then assumed).
 5: ``SelectionOut`` gains ``local_clear_m``, ``local_origin_xy_m`` and ``local_cell_m``; older messages
-   read with an empty window (the planner then steers by its path alone, as it did)."""
+   read with an empty window (the planner then steers by its path alone, as it did).
+6: ``SelectionOut`` gains ``target_reason``; older messages read with ``""`` (not logged)."""
 
 MIN_SCHEMA_VERSION = 1
 """Oldest schema version this code still reads."""
@@ -290,14 +291,14 @@ def decode(data: bytes | memoryview, cls: type[T] | None = None) -> T:
     found = RECORD_TYPES.get(name)
     if found is None:
         raise _corrupt(f"message holds an unknown record type {name!r}")
-    if int(m["_v"]) < 5:
+    if int(m["_v"]) < 6:
         _upgrade_selection(m.get("selection") if name == "StepRecord" else m if name == "SelectionOut" else None)
     return _build(found, m, name, skip=("_t", "_v"))
 
 
 def _upgrade_selection(m: object) -> None:
     """A ``SelectionOut`` map of an older schema version given the fields it lacks: ``node_leg_clear`` (< 4)
-    with every node clear, the local window (< 5) empty."""
+    with every node clear, the local window (< 5) empty, ``target_reason`` (< 6) ``""``."""
     if not isinstance(m, dict):
         return
     if "node_leg_clear" not in m and isinstance(m.get("node_xy_m"), dict):
@@ -308,6 +309,7 @@ def _upgrade_selection(m: object) -> None:
         m["local_clear_m"] = _pack_array(np.zeros((0, 0), np.float32))
         m["local_origin_xy_m"] = _pack_array(np.zeros(2, np.float64))
         m["local_cell_m"] = 0.0
+    m.setdefault("target_reason", "")
 
 
 # ------------------------------------------------------------------------------ state snapshots

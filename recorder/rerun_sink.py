@@ -249,7 +249,7 @@ class RerunSink:
             t = np.r_[s.target_xy_m, FLOOR_Z_M]
             yaw = s.target_yaw_rad if np.isfinite(s.target_yaw_rad) else 0.0
             self.rec.log("world/target", rr.Arrows3D(origins=[t], vectors=[[0.6 * np.cos(yaw), 0.6 * np.sin(yaw), 0]],
-                                                     colors=[(255, 0, 255)], radii=0.04, labels=[s.mode]))
+                                                     colors=[(255, 0, 255)], radii=0.04, labels=[_target_label(s)]))
         else:
             self.rec.log("world/target", rr.Clear(recursive=False))
 
@@ -264,6 +264,13 @@ class RerunSink:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
+
+
+def _target_label(s: records.SelectionOut) -> str:
+    """The target's label: how it was chosen, and what became of the one before when that is news."""
+    if s.target_reason in ("", "keep", "none") or s.mode == "keep":
+        return s.mode
+    return f"{s.mode} (previous {s.target_reason})"
 
 
 def _numpy(x: Any) -> np.ndarray:

@@ -770,5 +770,6 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
         cand_node=show.node.copy(), cand_yaw_rad=show.yaw_rad.copy(), cand_gain=show.gain.copy(),
         cand_risk=show.risk.copy(), cand_cost=show.cost.copy(), cand_score=show.score.copy(),
         local_clear_m=local_clear, local_origin_xy_m=local_origin, local_cell_m=float(marked.cell_m),
+        target_reason=reason,
     )
     return new_state, out

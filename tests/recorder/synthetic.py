@@ -87,7 +87,7 @@ def step_records(step: int, *, seed: int = 0, w: int = 160, h: int = 92, grid: t
                                      (np.arange(n_nodes) // 25).astype(np.int32), rng.random(n_nodes) < 0.1,
                                      rng.random(n_nodes) < 0.9, cand_node, rng.uniform(-np.pi, np.pi, n_cand), gain, risk, cost,
                                      gain - 0.5 * risk - 0.1 * cost, rng.uniform(0.0, 0.6, (24, 24)).astype(np.float32),
-                                     np.array([x - 0.6, y - 0.6]), 0.05)
+                                     np.array([x - 0.6, y - 0.6]), 0.05, ("keep", "stuck", "reached")[step % 3])
     path = np.linspace([x, y], nodes[7], 12)
     planning = records.PlanningOut(step % 3, path, float(rng.random() * 10), step % 4 == 0, False, False)
     metrics = Metrics(step, {"mapping/loss": mapping.loss, "gaussians": float(mapping.n_gaussians),
@@ -106,7 +106,8 @@ def step_records(step: int, *, seed: int = 0, w: int = 160, h: int = 92, grid: t
                                          np.zeros((0, 2)), np.zeros((0, 2), np.int32), np.zeros(0), np.zeros(0, np.int32),
                                          np.zeros(0, bool), np.zeros(0, bool), np.zeros(0, np.int32), np.zeros(0),
                                          np.zeros(0), np.zeros(0),
-                                         np.zeros(0), np.zeros(0), np.zeros((0, 0), np.float32), np.zeros(2), 0.0)
+                                         np.zeros(0), np.zeros(0), np.zeros((0, 0), np.float32), np.zeros(2), 0.0,
+                                         "none")
         truth = records.SimTruth(step, stamp_ns, mask, truth.robot, np.zeros((0, 2)), np.zeros(0), np.zeros(0), False)
         metrics = Metrics(step, {"nan": float("nan"), "payload": float(nan_payload[0]), "neg0": -0.0})
     return {"/frame": frame, "/truth": truth, "/perception": perception, "/mapping": mapping, "/fields": fields,

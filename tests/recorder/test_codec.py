@@ -263,3 +263,16 @@ def test_a_selection_of_schema_version_4_reads_with_an_empty_local_window():
     m["_v"] = SCHEMA_VERSION
     with pytest.raises(DagsError, match="missing \\['local_cell_m', 'local_clear_m', 'local_origin_xy_m'\\]"):
         decode(msgpack.packb(m))
+
+
+def test_a_selection_of_schema_version_5_reads_with_no_target_reason():
+    sel = next(r for r in all_record_types() if type(r).__name__ == "SelectionOut")
+    assert sel.target_reason != ""
+    m = msgpack.unpackb(encode(sel))
+    m.pop("target_reason")
+    m["_v"] = 5
+    old = decode(msgpack.packb(m))
+    assert old.target_reason == "" and np.array_equal(old.local_clear_m, sel.local_clear_m)
+    m["_v"] = SCHEMA_VERSION
+    with pytest.raises(DagsError, match="missing \\['target_reason'\\]"):
+        decode(msgpack.packb(m))

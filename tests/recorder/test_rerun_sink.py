@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import shutil
 import subprocess
 import sys
@@ -12,8 +13,8 @@ import torch
 
 from dynactivegs.splat.gaussians import Gaussians
 from recorder.codec import Metrics
-from recorder.rerun_sink import RerunSink, colormap, label_colors
-from tests.recorder.synthetic import step_records
+from recorder.rerun_sink import RerunSink, _target_label, colormap, label_colors
+from tests.recorder.synthetic import all_record_types, step_records
 
 SMALL = {"w": 48, "h": 28, "grid": (12, 10, 5), "n_nodes": 15, "n_cand": 40, "n_surface": 300}
 
@@ -64,3 +65,10 @@ def test_colour_helpers():
     assert c.dtype == np.uint8 and c.shape == (4, 3) and (c[3] == 128).all() and not (c[0] == c[2]).all()
     lc = label_colors(np.array([0, 1, 0, -1]))
     assert (lc[0] == lc[2]).all() and not (lc[0] == lc[1]).all() and (lc[3] == 160).all()
+
+
+def test_the_target_label_says_what_became_of_the_previous_target_when_it_changed():
+    sel = next(r for r in all_record_types() if type(r).__name__ == "SelectionOut")
+    assert _target_label(dataclasses.replace(sel, mode="global", target_reason="stuck")) == "global (previous stuck)"
+    assert _target_label(dataclasses.replace(sel, mode="local", target_reason="none")) == "local"
+    assert _target_label(dataclasses.replace(sel, mode="keep", target_reason="keep")) == "keep"

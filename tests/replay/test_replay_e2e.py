@@ -220,3 +220,12 @@ def test_bad_input_is_one_line_exit_2(recorded, capsys, tmp_path, monkeypatch):
         rc, out, err = replay(capsys, *argv)
         assert rc == 2, (argv, out, err)
         assert len(err.strip().splitlines()) == 1 and phrase in err and err.startswith("dagsreplay: error:"), err
+
+
+def test_a_target_reason_missing_from_an_older_log_is_not_a_difference(recorded):
+    from replay.engine import compare_records
+    sel = next(LogReader(recorded["log"]).steps())["/selection"]
+    assert sel.target_reason in ("keep", "reached", "unreachable", "stuck", "timeout", "none")
+    assert compare_records(sel, dataclasses.replace(sel, target_reason="")) is None
+    assert compare_records(sel, dataclasses.replace(sel, target_reason="timeout" if sel.target_reason != "timeout"
+                                                   else "keep"))[0] == "target_reason"

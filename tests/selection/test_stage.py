@@ -407,9 +407,14 @@ def test_an_unreachable_target_is_given_up_without_a_ban():
     state = state_on(cfg, free, lost)
     state, out = selection.step(cfg, rec, state, derive_rng(0, "sel"))
     assert out.mode != "keep" and state.target != lost and state.banned == ()
+    assert out.target_reason == "unreachable"
     stuck = dataclasses.replace(state, stuck_count=cfg.stuck_steps, stuck_anchor_xy_m=(4.5, 1.5), last_pose=None)
-    assert len(selection.step(cfg, dataclasses.replace(rec, frame=blind_frame(4.5, 1.5, 0.0, step=1)), stuck,
-                              derive_rng(0, "sel"))[0].banned) == 1                      # a stuck one is banned
+    after, out = selection.step(cfg, dataclasses.replace(rec, frame=blind_frame(4.5, 1.5, 0.0, step=1)), stuck,
+                                derive_rng(0, "sel"))
+    assert len(after.banned) == 1 and out.target_reason == "stuck"                      # a stuck one is banned
+    _, out = selection.step(cfg, dataclasses.replace(rec, frame=blind_frame(4.5, 1.5, 0.0, step=2)), after,
+                            derive_rng(0, "sel"))
+    assert out.target_reason == "keep" and out.mode == "keep"
 
 
 def test_standing_still_before_something_moving_is_a_wait_not_a_bump():
