@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import math
 
+import networkx as nx
 import numpy as np
 import pytest
 
@@ -415,6 +416,31 @@ def test_an_unreachable_target_is_given_up_without_a_ban():
     _, out = selection.step(cfg, dataclasses.replace(rec, frame=blind_frame(4.5, 1.5, 0.0, step=2)), after,
                             derive_rng(0, "sel"))
     assert out.target_reason == "keep" and out.mode == "keep"
+
+
+def test_a_target_cut_off_only_by_a_bump_disc_is_kept_on_the_graph_without_the_disc():
+    free = three_rooms()
+    fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0)], [])
+    target = selection.Target((1.5, 1.5), math.pi, "global", 0)      # in L; the robot stands in C
+    rec = StepRecord(frame=blind_frame(4.5, 1.5, math.pi, step=3), perception=PerceptionOut(
+        np.full((H, W), 0.1, np.float32), 0.0, False), mapping=mo, fields=fo)
+
+    def select(keep: bool, disc_xy: tuple[float, float]) -> tuple[selection.SelectionState, SelectionOut]:
+        cfg = selection.SelectionConfig(variant="gain_cost", bumps_keep_target=keep)
+        state = dataclasses.replace(state_on(cfg, free, target), bumps=(disc_xy + (20,),))
+        return selection.step(cfg, rec, state, derive_rng(0, "sel"))
+
+    in_corridor = (3.0, 1.5)                                        # fills the corridor from C to L
+    state, out = select(True, in_corridor)
+    assert out.target_reason == "keep" and state.target == target and state.banned == ()
+    assert len(state.bumps) == 1                                    # still kept, and still counted as a bump
+    graph = nx.Graph(out.edges.tolist())                            # the graph the planner gets joins the two
+    robot_node = int(np.argmin(np.linalg.norm(out.node_xy_m - [4.5, 1.5], axis=1)))
+    assert nx.has_path(graph, robot_node, out.target_node)
+    _, out = select(False, in_corridor)
+    assert out.target_reason == "unreachable" and out.mode != "keep"
+    beside = (4.5, 0.8)                                             # in C, off the way: nothing to leave out
+    assert select(True, beside)[1].target_reason == select(False, beside)[1].target_reason == "keep"
 
 
 def test_standing_still_before_something_moving_is_a_wait_not_a_bump():
