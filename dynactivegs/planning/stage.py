@@ -106,11 +106,11 @@ class PlanningConfig:
     there or waiting for the robot to give way, not crossing. Without it, full on apartment-00, seed 2, 1000
     steps, spent 114 steps waiting in 14 stand-offs of up to 21 steps each, with a person 0.48 m away (body
     to body) until the selection gave up on the target; over full's 12 runs on the 4 apartment scenes, seeds
-    0-2, 390 of the 677 waiting steps were in stand-offs longer than 6 steps. Closed loop, 8 of 12 pairs so
-    far (benchmarks/results/apartment-1000-waitevade, with selection.stuck_move_tol_m 0.3): full beats
-    baseline on Acc, C.R. and PSNR in 5 of 8 pairs (2 before), but full's mean went from 2.76 / 92.3 / 23.62
-    to 2.99 / 88.9 / 22.56, carried mostly by one run that shuttled between far targets. 0: wait until the way
-    clears or the selection gives up on the target."""
+    0-2, 390 of the 677 waiting steps were in stand-offs longer than 6 steps; with it, none of 427. Closed
+    loop, 12 pairs (benchmarks/results/apartment-1000-waitevade, with selection.stuck_move_tol_m 0.3): full
+    beats baseline on Acc, C.R. and PSNR in 8 of 12 pairs (2 before); full's mean Acc / C.R. / PSNR stayed
+    (3.00 / 90.0 / 22.91 against 2.96 / 90.0 / 23.15), baseline's fell (3.47 / 89.5 / 22.97 against
+    3.35 / 90.8 / 23.78). 0: wait until the way clears or the selection gives up on the target."""
     evade_turn_deg: float = 60.0
     """How far the robot turns away after bump_evade_after bumps or wait_evade_after waits in a row."""
     evade_reach_m: float = 1.0
