@@ -201,7 +201,8 @@ class SelectionOut:
     ``keep`` (the previous target still stands) or ``none`` (nothing left to explore).
     ``target_reason`` is what became of the previous target at this step: ``keep``, ``reached``,
     ``unreachable`` (no way to it in the graph), ``stuck`` (no progress, or too many bumps),
-    ``timeout``, or ``none`` (there was none); ``""`` in logs older than schema version 6.
+    ``timeout``, ``reopened`` (a better view beyond a disc that was let go), or ``none`` (there was none);
+    ``""`` in logs older than schema version 6.
     ``local_clear_m`` is the known free space around the robot for the planner's last metre: each
     cell's distance to the nearest occupied cell of the occupancy grid or kept bump disc (the
     measure of ``node_leg_clear``), capped where obstacles farther out were not looked for.
@@ -226,7 +227,7 @@ class SelectionOut:
     local_clear_m: np.ndarray     # float32 (L, L), distance to the nearest known obstacle around the robot; (0, 0): none
     local_origin_xy_m: np.ndarray  # float64 (2,), world xy of local_clear_m's lower-left corner
     local_cell_m: float           # cell size of local_clear_m: cell [i, j] is centred at origin + ((j, i) + 0.5) * cell
-    target_reason: str = ""       # what became of the previous target: keep, reached, unreachable, stuck, timeout, none
+    target_reason: str = ""       # what became of the previous target: keep, reached, unreachable, stuck, ...
 
     def __post_init__(self) -> None:
         n = self.node_xy_m.shape[0]

@@ -175,6 +175,12 @@ class SelectionConfig:
     38 times in a row before stuck_steps gave the target up. With 4 (and discs kept 100 steps), full's mean
     C.R. over apartment-00..03 x seeds 0, 1 at 600 steps went from 62.8 to 67.5 % (4 of the 8 runs changed,
     each to a higher C.R.)."""
+    recheck_on_reopen: bool = False
+    """full: when a bump or stuck disc is let go (bump_hold_steps) while the robot heads for a global target, the
+    views are scored again, and a different best view replaces the target (target_reason ``reopened``); the
+    same one stays, with its step counts. A disc in the only doorway to the flat's unseen part sends the robot
+    to a target at the other end; without the recheck it travels there even when the doorway opens a few
+    steps later (full, apartment-00, seed 1: trips of up to 144 steps between the two ends)."""
     bumps_keep_target: bool = True
     """A target that only the kept bump discs cut off from the robot (a disc filling a doorway or a corridor)
     stays the target: that step's graph leaves the discs out, and the target is given up by bump_give_up or
@@ -740,6 +746,8 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
                 xy_nodes, leg_clear, robot_node = _robot_node(cfg, marked, robot_xy, G)
         elif now - target.chosen_step >= cfg.target_timeout_steps:
             reason = "timeout"
+        elif cfg.recheck_on_reopen and target.mode == "global" and any(b[2] <= now for b in state.bumps + state.jams):
+            reason = "recheck"                  # a disc let go: a region it cut off may now be the better one
         else:
             reason = "keep"
     if reason in ("stuck", "timeout") or (reason == "reached" and cfg.variant in ("frontier", "random")):
@@ -750,6 +758,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
     scores = state.scores
     mode = "keep"
     if reason != "keep":
+        held, held_node = target, target_node
         target, target_node, scores = None, -1, Scores.empty(graph_step)
         if robot_node >= 0:
             ban_views = _banned_views(cfg, xy_nodes, banned, now)
@@ -762,11 +771,16 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
             else:
                 target, target_node, scores = _score_views(cfg, rec, G, arrays, regions, robot_node, robot_xy,
                                                            pose.yaw_rad, fmap, ban_views, history, graph_step, grid)
-        if target is not None:
+        if reason == "recheck":
+            if target is None or math.dist(target.xy_m, held.xy_m) <= cfg.reach_tol_m:
+                target, target_node, reason = held, held_node, "keep"     # the same view: it stands, counts and all
+            else:
+                reason = "reopened"
+        if reason != "keep" and target is not None:
             target = Target(target.xy_m, target.yaw_rad, target.mode, now)
             mode = target.mode
             anchor, count = (float(robot_xy[0]), float(robot_xy[1])), 0
-        else:
+        elif reason != "keep":
             mode = "none"
 
     new_state = SelectionState(grid, G, arrays, regions, graph_step, target, history, anchor, count, banned, scores,

@@ -443,6 +443,29 @@ def test_a_target_cut_off_only_by_a_bump_disc_is_kept_on_the_graph_without_the_d
     assert select(True, beside)[1].target_reason == select(False, beside)[1].target_reason == "keep"
 
 
+def test_a_disc_let_go_rechecks_a_global_target_and_a_better_view_replaces_it():
+    free = three_rooms()
+    fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0)], [])      # the gain is in L; the robot stands in C
+    rec = StepRecord(frame=blind_frame(4.5, 1.5, 0.0, step=30), perception=PerceptionOut(
+        np.full((H, W), 0.1, np.float32), 0.0, False), mapping=mo, fields=fo)
+    far = selection.Target((7.5, 1.5), 0.0, "global", 10)            # in R, chosen while L was cut off
+
+    def select(recheck: bool, held: selection.Target, until: int) -> tuple[selection.SelectionState, SelectionOut]:
+        cfg = selection.SelectionConfig(recheck_on_reopen=recheck)
+        state = dataclasses.replace(state_on(cfg, free, held), jams=((3.0, 1.5, until),), stuck_count=7,
+                                    stuck_anchor_xy_m=(4.5, 1.5))
+        return selection.step(cfg, rec, state, derive_rng(0, "sel"))
+
+    state, out = select(True, far, 30)                               # the corridor's disc is let go now
+    assert out.target_reason == "reopened" and state.target.xy_m[0] < 3.5 and state.target.chosen_step == 30
+    assert state.banned == ()                                        # nothing was given up
+    assert select(False, far, 30)[1].target_reason == "keep"
+    assert select(True, far, 31)[1].target_reason == "keep"          # still held: nothing to recheck
+    best = dataclasses.replace(state.target, mode="global", chosen_step=10)
+    state, out = select(True, best, 30)                              # the best view already: it stands
+    assert out.target_reason == "keep" and state.target == best and state.stuck_count == 8
+
+
 def test_standing_still_before_something_moving_is_a_wait_not_a_bump():
     free = three_rooms()
     fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0)], [])
