@@ -181,14 +181,20 @@ class SelectionConfig:
     same one stays, with its step counts. A disc in the only doorway to the flat's unseen part sends the robot
     to a target at the other end; without the recheck it travels there even when the doorway opens a few
     steps later (full, apartment-00, seed 1: trips of up to 144 steps between the two ends)."""
-    bumps_keep_target: bool = True
-    """A target that only the kept bump discs cut off from the robot (a disc filling a doorway or a corridor)
-    stays the target: that step's graph leaves the discs out, and the target is given up by bump_give_up or
-    the stuck rule instead. False: it is given up at once as unreachable, without a ban, and the next target
-    lies on the robot's side of the disc. Measured: full, apartment-00, seed 1, 1000 steps, gave up 8
-    targets as unreachable, 5 of them only through a disc (the graph without the discs reached them), and
-    shuttled between far targets at the two ends of the flat past a doorway at x = 3-4 m (65.2 % C.R.,
-    15.09 dB)."""
+    bumps_keep_target: bool = False
+    """True: a target that only the kept bump discs cut off from the robot (a disc filling a doorway or a
+    corridor) stays the target: that step's graph leaves the discs out, and the target is given up by
+    bump_give_up or the stuck rule instead. False (default): it is given up at once as unreachable, without a
+    ban, and the next target lies on the robot's side of the disc. Why it was tried: full, apartment-00, seed
+    1, 1000 steps, gave up 8 targets as unreachable, 5 of them only through a disc (the graph without the
+    discs reached them), and shuttled between far targets at the two ends of the flat past a doorway at
+    x = 3-4 m (65.2 % C.R., 15.09 dB); over full's 12 runs of apartment-1000-waitevade, 36 of 66 unreachable
+    give-ups were such cuts. Measured with full, 1000 steps (C.R. % / PSNR dB, off -> on): apartment-00
+    seed 0 90.1 / 23.70 -> 80.8 / 17.93; apartment-01 seed 0 92.1 / 22.84 -> 92.3 /
+    22.65; apartment-02 seed 0 93.0 / 23.35 -> 93.0 / 22.76; apartment-00 seed 1 65.2 / 15.09 -> 67.5 / 15.57
+    (it still collapsed: held at the doorway by people pressing on the robot, the stuck give-up's disc cut the
+    west off). Mean of the 4 (Acc cm / C.R. % / PSNR dB): 3.30 / 85.09 / 21.24 off, 3.38 / 83.38 / 19.73
+    on, so it stays off."""
 
     stuck_disc: bool = True
     """A target given up as stuck (stuck_steps) while the rectangle of the robot's next forward step holds
