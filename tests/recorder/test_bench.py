@@ -225,3 +225,26 @@ def test_psnr_ceiling_reads_a_logged_run(finished):
     assert r["train"] > r["heldout"] + 10.0
     assert r["overfit_after"] > r["overfit_before"]
     assert 15.0 < r["floor"] < 60.0
+
+
+def test_refine_passes_reproduces_the_runs_refinement_and_goes_on(finished):
+    """benchmarks/refine_passes.py on the sweep's full run: re-running mapping over the log and refining with the
+    run's 3 passes gives the run's refined map (the same metrics as dagsbench's 100 % row); 1 and 6 passes differ."""
+    import importlib.util
+
+    from dynactivegs.eval.config import EvalConfig
+
+    out, cache = finished
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / "refine_passes.py"
+    spec = importlib.util.spec_from_file_location("refine_passes", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    label, rows = mod.sweep_run(out / "runs" / "full" / "tiny-00-seed0.mcap", [1, 3, 6],
+                                EvalConfig(n_views=4, n_gt_points=5000, coverage_points=500, cache_dir=str(cache)))
+    r = dict(rows)
+    metrics = json.loads((out / "runs" / "full" / "tiny-00-seed0.json").read_text())["checkpoints"][-1]
+    assert label.startswith("tiny-00 seed 0") and list(r) == ["logged", "1 passes", "3 passes", "6 passes"]
+    for k in ("n_gaussians", "acc_cm", "cr_pct", "psnr_db"):
+        assert r["3 passes"][k] == r["logged"][k] == pytest.approx(metrics[k])
+    assert r["1 passes"]["psnr_db"] != r["3 passes"]["psnr_db"] != r["6 passes"]["psnr_db"]
+    assert r["1 passes"]["seconds"] <= r["3 passes"]["seconds"] <= r["6 passes"]["seconds"]
