@@ -180,7 +180,11 @@ class SelectionConfig:
     views are scored again, and a different best view replaces the target (target_reason ``reopened``); the
     same one stays, with its step counts. A disc in the only doorway to the flat's unseen part sends the robot
     to a target at the other end; without the recheck it travels there even when the doorway opens a few
-    steps later (full, apartment-00, seed 1: trips of up to 144 steps between the two ends)."""
+    steps later (full, apartment-00, seed 1: trips of up to 144 steps between the two ends). Measured with
+    full, 1000 steps (Acc cm / C.R. % / PSNR dB, off -> on): apartment-00 seed 0 3.11 / 90.1 / 23.70 -> 2.88 /
+    90.1 / 23.83; seed 1 5.23 / 65.2 / 15.09 -> 4.32 / 51.3 / 12.58 (it never left the east half: from step 46
+    on the graph was cut at the west doorway, where a person had stood for 17 steps and left occupied cells
+    the robot did not see long enough to clear). Not a gain: off."""
     bumps_keep_target: bool = False
     """True: a target that only the kept bump discs cut off from the robot (a disc filling a doorway or a
     corridor) stays the target: that step's graph leaves the discs out, and the target is given up by
