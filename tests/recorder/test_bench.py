@@ -10,6 +10,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from dynactivegs.eval.progress import checkpoint_steps
@@ -204,19 +205,24 @@ def test_a_pool_worker_whose_parent_died_while_it_started_exits():
     assert child.returncode == 0 and "alive" in child.stdout
 
 
+def _benchmark_module(name: str):
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[2] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
 def test_psnr_ceiling_reads_a_logged_run(finished):
     """benchmarks/psnr_ceiling.py on the sweep's full run: its held-out PSNR is dagsbench's, the map fits the
     views it was trained on far better than the held-out ones after 6 steps, fitting one view alone raises
     that view's PSNR, and box-filtered renders differ from the point-sampled ones."""
-    import importlib.util
-
     from dynactivegs.eval.config import EvalConfig
 
     out, cache = finished
-    path = Path(__file__).resolve().parents[2] / "benchmarks" / "psnr_ceiling.py"
-    spec = importlib.util.spec_from_file_location("psnr_ceiling", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = _benchmark_module("psnr_ceiling")
     ecfg = EvalConfig(n_views=4, cache_dir=str(cache))
     label, r = mod.run_ceiling(out / "runs" / "full" / "tiny-00-seed0.mcap", False, 2, 50, 2, ecfg)
     metrics = json.loads((out / "runs" / "full" / "tiny-00-seed0.json").read_text())["checkpoints"][-1]
@@ -230,15 +236,10 @@ def test_psnr_ceiling_reads_a_logged_run(finished):
 def test_refine_passes_reproduces_the_runs_refinement_and_goes_on(finished):
     """benchmarks/refine_passes.py on the sweep's full run: re-running mapping over the log and refining with the
     run's 3 passes gives the run's refined map (the same metrics as dagsbench's 100 % row); 1 and 6 passes differ."""
-    import importlib.util
-
     from dynactivegs.eval.config import EvalConfig
 
     out, cache = finished
-    path = Path(__file__).resolve().parents[2] / "benchmarks" / "refine_passes.py"
-    spec = importlib.util.spec_from_file_location("refine_passes", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = _benchmark_module("refine_passes")
     label, rows = mod.sweep_run(out / "runs" / "full" / "tiny-00-seed0.mcap", [1, 3, 6],
                                 EvalConfig(n_views=4, n_gt_points=5000, coverage_points=500, cache_dir=str(cache)))
     r = dict(rows)
@@ -248,3 +249,32 @@ def test_refine_passes_reproduces_the_runs_refinement_and_goes_on(finished):
         assert r["3 passes"][k] == r["logged"][k] == pytest.approx(metrics[k])
     assert r["1 passes"]["psnr_db"] != r["3 passes"]["psnr_db"] != r["6 passes"]["psnr_db"]
     assert r["1 passes"]["seconds"] <= r["3 passes"]["seconds"] <= r["6 passes"]["seconds"]
+
+
+def test_occupancy_errors_counts_a_false_obstacle_and_a_cleared_wall():
+    """benchmarks/occupancy_errors.py's measure on a constructed case: a 2 m room with a 0.3 m thick wall
+    across it; the grid holds one cell of open floor occupied and one cell inside the wall free."""
+    from scipy.ndimage import distance_transform_edt
+
+    from dynactivegs.selection.occupancy import OccupancyConfig, OccupancyGrid
+    from dynactivegs.sim.freespace import FreeSpace
+
+    mod = _benchmark_module("occupancy_errors")
+    occ = np.zeros((40, 40), bool)
+    occ[:, 20:26] = True                                      # x in [1.0, 1.3): a wall 6 cells thick
+    fs = FreeSpace.from_grid(occ, 0.05)
+    free = fs.floor & ~fs.occupied
+    clear_m, inside_m = distance_transform_edt(free) * 0.05, distance_transform_edt(~free) * 0.05
+    cfg = OccupancyConfig()
+    logodds = np.full((40, 40), -1.0, np.float32)
+    logodds[occ] = 2.0
+    perfect = OccupancyGrid((0, 0), 0.05, logodds.copy())
+    e = mod.grid_errors(perfect, cfg, fs, clear_m, inside_m, 0.15)
+    assert e["false_occ_m2"] == 0 and e["false_free_m2"] == 0 and e["known_free_pct"] == pytest.approx(100.0)
+    logodds[10, 5] = 2.0                                      # open floor, 0.75 m from the wall
+    logodds[10, 19] = 2.0                                     # next to the wall face: not counted
+    logodds[30, 22] = -1.0                                    # inside the wall, two cells in
+    logodds[30, 20] = -1.0                                    # the wall's face cell: not counted
+    e = mod.grid_errors(OccupancyGrid((0, 0), 0.05, logodds), cfg, fs, clear_m, inside_m, 0.15)
+    assert e["false_occ_m2"] == pytest.approx(0.0025) and e["false_free_m2"] == pytest.approx(0.0025)
+    assert e["known_free_pct"] == pytest.approx(100.0 * (free.sum() - 2) / free.sum())

@@ -1,0 +1,129 @@
+"""How far the selection's occupancy grid is from the scene's true free space, on logged runs.
+
+    python benchmarks/occupancy_errors.py runs/full/apartment-00-seed1.mcap [more.mcap ...] \
+        [--set selection.occupancy.logodds_max=2.0 ...]
+
+For each run log it integrates the logged frames into an occupancy grid with the selection
+stage's rule (:func:`dynactivegs.selection.occupancy.update_occupancy`, the logged depth, pose
+and perception beta), once with the run's config and, with ``--set``, once more with the
+overrides, and compares the grid with the simulator's free space of the static scene (people
+are not in it) at 25/50/75/100 % of the run and at its worst step:
+
+- **false occupied** (m2): cells the grid holds OCCUPIED that are free floor at least
+  ``--margin`` from any obstacle (edge cells, where a cell straddles a wall face, do not count).
+  These are what people standing still leave behind; they cut the graph at doorways.
+- **false free** (m2): cells the grid holds FREE that lie inside an obstacle (at least one cell
+  in from its edge): what rays grazing walls or passing under tables clear.
+- **known free** (%): the share of the true free floor the grid holds FREE.
+
+Open loop: the frames are the logged ones, so a what-if config changes the grid, not the path.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from psnr_breakdown import logged_config  # noqa: E402  (the same reading of a run log)
+
+FRACTIONS = (0.25, 0.5, 0.75, 1.0)
+
+
+def truth_maps(sim_cfg) -> tuple[object, np.ndarray, np.ndarray]:
+    """(the scene's FreeSpace, float (H, W) distance of free cells to the nearest obstacle cell in metres,
+    float (H, W) distance of obstacle cells to the nearest free cell in metres)."""
+    from scipy.ndimage import distance_transform_edt
+
+    from dynactivegs.sim import scenes
+
+    scene = scenes.load_scene(sim_cfg)
+    fs = scenes.scene_freespace(scene, scenes.scene_renderer(scene), sim_cfg.grid_res_m, sim_cfg.robot.body_height_m)
+    free = fs.floor & ~fs.occupied
+    return fs, distance_transform_edt(free) * fs.res_m, distance_transform_edt(~free) * fs.res_m
+
+
+def grid_errors(grid, occ_cfg, fs, clear_m: np.ndarray, inside_m: np.ndarray, margin_m: float) -> dict[str, float]:
+    """false occupied / false free areas (m2) and the known share (%) of the true free floor of one grid."""
+    states = grid.states(occ_cfg)
+    h, w = grid.shape
+    ii, jj = np.meshgrid(np.arange(h), np.arange(w), indexing="ij")
+    xy = grid.cell_to_world(np.stack([ii, jj], axis=-1))
+    t = np.floor((xy - fs.origin_xy_m) / fs.res_m).astype(np.int64)       # (col, row) of the truth map
+    th, tw = fs.shape
+    ok = (t[..., 0] >= 0) & (t[..., 0] < tw) & (t[..., 1] >= 0) & (t[..., 1] < th)
+    r, c = np.clip(t[..., 1], 0, th - 1), np.clip(t[..., 0], 0, tw - 1)
+    cell_area = grid.cell_m ** 2
+    true_free = ok & (clear_m[r, c] > 0)
+    false_occ = ok & (clear_m[r, c] >= margin_m) & (states == 2)
+    false_free = ok & (inside_m[r, c] > fs.res_m) & (states == 1)
+    n_free = float((fs.floor & ~fs.occupied).sum()) * fs.res_m ** 2
+    return {"false_occ_m2": float(false_occ.sum()) * cell_area, "false_free_m2": float(false_free.sum()) * cell_area,
+            "known_free_pct": 100.0 * float((true_free & (states == 1)).sum()) * cell_area / max(n_free, 1e-9)}
+
+
+def run_errors(mcap: Path, overrides: list[str], margin_m: float) -> tuple[str, dict[str, list[tuple[int, dict]]]]:
+    """(a label, {config name: [(step, errors)] at the checkpoints and the worst step}) of one run log."""
+    from dynactivegs.config import with_overrides
+    from dynactivegs.selection.occupancy import OccupancyGrid, update_occupancy
+    from replay.source import LogReader
+
+    reader = LogReader(mcap)
+    cfg = logged_config(reader, mcap)
+    configs = {"logged": cfg.selection.occupancy}
+    if overrides:
+        configs["what-if"] = with_overrides(cfg, overrides).selection.occupancy
+    fs, clear_m, inside_m = truth_maps(cfg.sim)
+    grids = {k: OccupancyGrid.empty(c.cell_m) for k, c in configs.items()}
+    per_step: dict[str, list[tuple[int, dict]]] = {k: [] for k in configs}
+    n = 0
+    for st in reader.steps():
+        f = st["/frame"]
+        beta = st["/perception"].beta
+        for k, c in configs.items():
+            grids[k] = update_occupancy(grids[k], c, f.depth_m, f.K, f.T_world_cam, beta)
+            per_step[k].append((st.step, grid_errors(grids[k], c, fs, clear_m, inside_m, margin_m)))
+        n += 1
+    out: dict[str, list[tuple[int, dict]]] = {}
+    for k, rows in per_step.items():
+        picks = [rows[max(0, int(round(fr * n)) - 1)] for fr in FRACTIONS]
+        worst = max(rows, key=lambda r: r[1]["false_occ_m2"])
+        out[k] = picks + [worst]
+    return f"{cfg.sim.scene} seed {cfg.seed}", out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("mcap", nargs="+", type=Path, help="run logs (dagsrun --record, or dagsbench's OUT/runs/PRESET/)")
+    ap.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
+                    help="what-if overrides, e.g. selection.occupancy.logodds_max=2.0")
+    ap.add_argument("--margin", type=float, default=0.15,
+                    help="false occupied cells are at least this far (m) from a true obstacle (default 0.15)")
+    args = ap.parse_args()
+    if args.margin < 0:
+        sys.exit(f"error: bad --margin {args.margin}: must be >= 0 m")
+    from dynactivegs.errors import DagsError
+
+    print("| run | config | step | false occupied m2 | false free m2 | known free % |\n|---|---|---|---|---|---|",
+          flush=True)
+    for path in args.mcap:
+        if not path.is_file():
+            sys.exit(f"error: {path}: no such file; pass the .mcap of a dagsrun or dagsbench run")
+        try:
+            label, out = run_errors(path, args.set, args.margin)
+        except DagsError as e:
+            sys.exit(f"error: {e}")
+        for k, rows in out.items():
+            for i, (step, e) in enumerate(rows):
+                name = f"{step} (worst)" if i == len(FRACTIONS) else str(step)
+                print(f"| {label} | {k} | {name} | {e['false_occ_m2']:.3f} | {e['false_free_m2']:.3f} | "
+                      f"{e['known_free_pct']:.1f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
