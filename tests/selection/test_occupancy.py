@@ -107,6 +107,24 @@ def test_an_uncertain_person_clears_space_but_is_not_an_obstacle():
     assert g.states(CFG)[tuple(g.world_to_cell(np.array(cell_person)))] == CellState.FREE
 
 
+def test_a_person_who_stood_long_is_cleared_in_a_few_frames_of_seeing_through():
+    """logodds_max caps what a calm person standing for 20 frames leaves: 6 frames of the empty room clear it.
+    At a cap of 3.5 the cell was still occupied then (a doorway stayed shut for the rest of a run)."""
+    person = (2.43, 1.33, 2.83, 1.73, 1.8)
+    depth, K, T, _ = _room_frame(boxes=[person])
+    empty_depth, _, _, _ = _room_frame()
+    beta = np.zeros_like(depth)
+    for cap, after_6 in ((CFG.logodds_max, CellState.FREE), (3.5, CellState.OCCUPIED)):
+        cfg = dataclasses.replace(CFG, logodds_max=cap)
+        g = OccupancyGrid.empty(cfg.cell_m)
+        for _ in range(20):
+            g = update_occupancy(g, cfg, depth, K, T, beta)
+        ij = tuple(g.world_to_cell(np.array([2.45, 1.5])))
+        assert g.states(cfg)[ij] == CellState.OCCUPIED and g.logodds[ij] == pytest.approx(cap)
+        for _ in range(6):
+            g = update_occupancy(g, cfg, empty_depth, K, T, beta)
+        assert g.states(cfg)[ij] == after_6
+
 def test_rays_passing_high_over_a_low_obstacle_leave_it_occupied():
     seat = (2.03, 1.33, 2.43, 1.73, 0.5)
     depth, K, T, _ = _room_frame(boxes=[seat], x=0.3)             # seen from 1.7 m
