@@ -200,6 +200,13 @@ class SelectionConfig:
     west off). Mean of the 4 (Acc cm / C.R. % / PSNR dB): 3.30 / 85.09 / 21.24 off, 3.38 / 83.38 / 19.73
     on, so it stays off."""
 
+    cut_hold_local: bool = False
+    """A target given up as unreachable where only the bump and stuck discs cut the way (the graph without them
+    still reaches it): until those discs are let go, every new target is the best view of the robot's own
+    subregion (whatever its score; elsewhere only when the subregion has none), not a view in a far subregion.
+    Then the views are scored as usual, and the region the discs cut off can be chosen again. Without it, a
+    disc in a corridor sends the robot to a target at the other end of the flat, and the next disc back."""
+
     stuck_disc: bool = True
     """A target given up as stuck (stuck_steps) while the rectangle of the robot's next forward step holds
     returns (at least actions.min_blocking_points, as in the planner's check; moving or not) also leaves a
@@ -305,6 +312,7 @@ class SelectionState:
     last_pose: tuple[float, float, float] | None   # (x, y, yaw) at the previous step
     bumps: tuple[tuple[float, float, int], ...] = ()   # (x, y, kept until this step): bump discs' centres
     jams: tuple[tuple[float, float, int], ...] = ()    # (x, y, kept until this step): stuck discs' centres
+    local_until: int = -1         # new targets come from the robot's subregion before this step (cut_hold_local)
 
     def __post_init__(self) -> None:
         self.history_xy_m.flags.writeable = False
@@ -551,6 +559,14 @@ def _bumps_since(cfg: SelectionConfig, bumps: tuple[tuple[float, float, int], ..
     return sum(1 for _, _, until in bumps if until - cfg.bump_hold_steps >= step)
 
 
+def _reaches(cfg: SelectionConfig, grid: OccupancyGrid, robot_xy: np.ndarray, target_xy: np.ndarray) -> bool:
+    """Whether the graph of ``grid`` alone (no bump or stuck discs) has a way from the robot to the target."""
+    G, arrays, _ = _build_graph(cfg, grid, None)
+    xy, _, robot = _robot_node(cfg, grid, robot_xy, G)
+    node, snap = _nearest(xy, target_xy)
+    return robot >= 0 and snap <= cfg.target_snap_m and bool(np.isfinite(_path_lengths(arrays, robot)[0][node]))
+
+
 def _turning_rad(xy: np.ndarray, yaws: np.ndarray, robot_xy: np.ndarray, robot_yaw: float, here_m: float) -> np.ndarray:
     """(N, Y) radians of turning to take view (node n, yaw k): toward the node, then to the view's yaw
     (just to the yaw at a node within ``here_m``). The straight bearing stands in for the path's."""
@@ -564,11 +580,14 @@ def _turning_rad(xy: np.ndarray, yaws: np.ndarray, robot_xy: np.ndarray, robot_y
 
 def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, arrays: GraphArrays, regions: Subregions,
                  robot_node: int, robot_xy: np.ndarray, robot_yaw: float, fmap: FloorMap | None, banned: np.ndarray,
-                 history: np.ndarray, graph_step: int, grid: OccupancyGrid) -> tuple[Target | None, int, Scores]:
+                 history: np.ndarray, graph_step: int, grid: OccupancyGrid,
+                 local_only: bool = False) -> tuple[Target | None, int, Scores]:
     """Scored variants: candidate views at every reachable node, eqs. (7)-(10); returns (target, node, scores).
 
     ``banned`` bool (N, n_yaws): views that may not be chosen (their score is -inf). Occluders: the map's
-    surface and the obstacle columns of the occupancy ``grid`` (:func:`column_occluders`)."""
+    surface and the obstacle columns of the occupancy ``grid`` (:func:`column_occluders`). ``local_only``
+    (``full``): the best view of the robot's subregion, whatever its score, when it has one
+    (SelectionConfig.cut_hold_local)."""
     vis = cfg.visibility
     xy_nodes = node_xy(state_graph)
     full = cfg.variant == "full"
@@ -618,7 +637,7 @@ def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, a
         in_local = labels == local
         if in_local.any():
             r, k = best_in(in_local)
-            if score[r, k] > cfg.local_threshold:
+            if score[r, k] > cfg.local_threshold or (local_only and np.isfinite(score[r, k])):
                 mode = "local"
         if mode is None:
             others = [int(g) for g in np.unique(labels) if g != local and np.isfinite(score[labels == g]).any()]
@@ -725,6 +744,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
 
     # keep the target, or say why not
     target, banned = state.target, tuple(b for b in state.banned if b[2] > now)
+    local_until = state.local_until
     target_node, reason = -1, "none"
     if target is not None and robot_node >= 0:
         txy = np.array(target.xy_m)
@@ -744,6 +764,8 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
             reason = "reached"
         elif not reachable:
             reason = "unreachable"
+            if cfg.cut_hold_local and bumps + jams and _reaches(cfg, grid, robot_xy, txy):
+                local_until = max(b[2] for b in bumps + jams)     # only the discs cut it (SelectionConfig.cut_hold_local)
         elif count >= cfg.stuck_steps or (cfg.bump_give_up and _bumps_since(cfg, bumps, target.chosen_step)
                                            >= cfg.bump_give_up):
             reason = "stuck"
@@ -780,7 +802,8 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
                 target, target_node = _choose_random(cfg, G, arrays, robot_node, robot_xy, ban_mask, rng)
             else:
                 target, target_node, scores = _score_views(cfg, rec, G, arrays, regions, robot_node, robot_xy,
-                                                           pose.yaw_rad, fmap, ban_views, history, graph_step, grid)
+                                                           pose.yaw_rad, fmap, ban_views, history, graph_step, grid,
+                                                           local_only=now < local_until)
         if reason == "recheck":
             if target is None or math.dist(target.xy_m, held.xy_m) <= cfg.reach_tol_m:
                 target, target_node, reason = held, held_node, "keep"     # the same view: it stands, counts and all
@@ -794,7 +817,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
             mode = "none"
 
     new_state = SelectionState(grid, G, arrays, regions, graph_step, target, history, anchor, count, banned, scores,
-                               (float(pose.x_m), float(pose.y_m), float(pose.yaw_rad)), bumps, jams)
+                               (float(pose.x_m), float(pose.y_m), float(pose.yaw_rad)), bumps, jams, local_until)
     show = scores if scores.graph_step == graph_step else Scores.empty()
     if target is None:
         t_xy, t_yaw, t_node = robot_xy.copy(), float(pose.yaw_rad), -1

@@ -466,6 +466,38 @@ def test_a_disc_let_go_rechecks_a_global_target_and_a_better_view_replaces_it():
     assert out.target_reason == "keep" and state.target == best and state.stuck_count == 8
 
 
+def test_a_target_cut_off_only_by_a_disc_holds_new_targets_in_the_robots_subregion_until_the_disc_goes():
+    free = np.zeros((60, 240), bool)                                 # rooms L, C, R, RR in a row; the robot in C
+    for x0 in (0.5, 3.5, 6.5, 9.5):
+        fill(free, x0, 0.5, x0 + 2.0, 2.5)
+    for x0 in (2.5, 5.5, 8.5):
+        fill(free, x0, 1.2, x0 + 1.0, 1.8)
+    fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0), (9.5, 0.5, 11.5, 2.5, 1.0), (2.5, 0.5, 9.5, 2.5, 0.02)],
+                        [])                                          # gain in L and RR
+    held = selection.Target((1.5, 1.5), math.pi, "global", 0)        # in L
+
+    def select(hold: bool, step: int = 20, local_until: int = -1, target=held):
+        cfg = selection.SelectionConfig(cut_hold_local=hold, subregions=SubregionConfig(cut_distance=3.0))
+        state = dataclasses.replace(state_on(cfg, free, target), jams=((3.0, 1.5, 30),), local_until=local_until)
+        rec = StepRecord(frame=blind_frame(4.5, 1.5, math.pi, step=step), perception=PerceptionOut(
+            np.full((H, W), 0.1, np.float32), 0.0, False), mapping=mo, fields=fo)
+        return selection.step(cfg, rec, state, derive_rng(0, "sel"))
+
+    state, out = select(False)                                       # the disc cuts the corridor to L: off to RR
+    assert out.target_reason == "unreachable" and out.mode == "global" and state.target.xy_m[0] > 8.0
+    state, out = select(True)                                        # held in C until the disc goes at step 30
+    assert out.target_reason == "unreachable" and out.mode == "local" and 3.0 <= state.target.xy_m[0] <= 5.5
+    assert state.local_until == 30 and state.banned == ()
+    # a target reached before step 30 is followed by one in C again (off to RR without the hold); from step 30
+    # on the views are scored as usual
+    reached = dataclasses.replace(state.target, xy_m=(4.5, 1.5), yaw_rad=math.pi)
+    state, out = select(True, step=25, local_until=30, target=reached)
+    assert out.target_reason == "reached" and out.mode == "local" and 3.0 <= state.target.xy_m[0] <= 5.5
+    assert select(False, step=25, target=reached)[0].target.xy_m[0] > 8.0
+    assert select(True, step=30, local_until=30, target=reached)[0].target == \
+        select(False, step=30, target=reached)[0].target
+
+
 def test_standing_still_before_something_moving_is_a_wait_not_a_bump():
     free = three_rooms()
     fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0)], [])
