@@ -87,10 +87,10 @@ class OccupancyConfig:
     apartment-00, seed 1 (with recheck_on_reopen), a person stood 17 steps in the west doorway, the robot saw
     the doorway empty for 7 frames, and the cells left shut the graph there for the rest of the run
     (benchmarks/occupancy_errors.py on its log: 0.045 m2 of open floor held occupied at the end, 0 at 2.0;
-    walls and furniture held free 1.32 -> 1.48 m2).
-    Measured with full, 1000 steps (Acc cm / C.R. % / PSNR dB, 3.5 -> 2.0): apartment-00 seed 0 3.11 / 90.1 /
-    23.70 -> 2.60 / 92.4 / 25.61; apartment-00 seed 1 5.23 / 65.2 / 15.09 -> 3.15 / 76.7 / 17.20;
-    apartment-01 seed 1 3.80 / 90.2 / 22.26 -> 2.49 / 92.0 / 23.32."""
+    walls and furniture held free 1.32 -> 1.48 m2). Measured with full, 1000 steps, on apartment-00..03 x seeds
+    0-2 (benchmarks/results/apartment-1000-lomax; Acc cm / C.R. % / PSNR dB, mean of 12, 3.5 -> 2.0): 3.00 /
+    90.04 / 22.91 -> 2.82 / 90.72 / 23.22; apartment-00 seed 1 5.23 / 65.2 / 15.09 -> 3.15 / 76.7 / 17.20.
+    Per run it is mixed: 5 runs better on all three, 5 worse."""
     free_below: float = -0.2
     """A cell with log-odds below this is FREE."""
     occupied_above: float = 0.2

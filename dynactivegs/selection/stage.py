@@ -194,11 +194,10 @@ class SelectionConfig:
     discs reached them), and shuttled between far targets at the two ends of the flat past a doorway at
     x = 3-4 m (65.2 % C.R., 15.09 dB); over full's 12 runs of apartment-1000-waitevade, 36 of 66 unreachable
     give-ups were such cuts. Measured with full, 1000 steps (C.R. % / PSNR dB, off -> on): apartment-00
-    seed 0 90.1 / 23.70 -> 80.8 / 17.93; apartment-01 seed 0 92.1 / 22.84 -> 92.3 /
-    22.65; apartment-02 seed 0 93.0 / 23.35 -> 93.0 / 22.76; apartment-00 seed 1 65.2 / 15.09 -> 67.5 / 15.57
-    (it still collapsed: held at the doorway by people pressing on the robot, the stuck give-up's disc cut the
-    west off). Mean of the 4 (Acc cm / C.R. % / PSNR dB): 3.30 / 85.09 / 21.24 off, 3.38 / 83.38 / 19.73
-    on, so it stays off."""
+    seed 0 90.1 / 23.70 -> 80.8 / 17.93; apartment-01 seed 0 92.1 / 22.84 -> 92.3 / 22.65; apartment-02 seed
+    0 93.0 / 23.35 -> 93.0 / 22.76; apartment-00 seed 1 65.2 / 15.09 -> 67.5 / 15.57 (it still collapsed: held
+    at the doorway by people pressing on the robot, the stuck give-up's disc cut the west off). Mean of the 4
+    (Acc cm / C.R. % / PSNR dB): 3.30 / 85.09 / 21.24 off, 3.38 / 83.38 / 19.73 on, so it stays off."""
 
     cut_hold_local: bool = False
     """A target given up as unreachable where only the bump and stuck discs cut the way (the graph without them

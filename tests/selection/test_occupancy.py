@@ -125,6 +125,7 @@ def test_a_person_who_stood_long_is_cleared_in_a_few_frames_of_seeing_through():
             g = update_occupancy(g, cfg, empty_depth, K, T, beta)
         assert g.states(cfg)[ij] == after_6
 
+
 def test_rays_passing_high_over_a_low_obstacle_leave_it_occupied():
     seat = (2.03, 1.33, 2.43, 1.73, 0.5)
     depth, K, T, _ = _room_frame(boxes=[seat], x=0.3)             # seen from 1.7 m
