@@ -564,12 +564,15 @@ def _bumps_since(cfg: SelectionConfig, bumps: tuple[tuple[float, float, int], ..
     return sum(1 for _, _, until in bumps if until - cfg.bump_hold_steps >= step)
 
 
-def _reaches(cfg: SelectionConfig, grid: OccupancyGrid, robot_xy: np.ndarray, target_xy: np.ndarray) -> bool:
-    """Whether the graph of ``grid`` alone (no bump or stuck discs) has a way from the robot to the target."""
-    G, arrays, _ = _build_graph(cfg, grid, None)
-    xy, _, robot = _robot_node(cfg, grid, robot_xy, G)
+def _graph_to(cfg: SelectionConfig, grid: OccupancyGrid, fmap: FloorMap | None, robot_xy: np.ndarray,
+              target_xy: np.ndarray):
+    """The graph of ``grid`` (as :func:`_build_graph`), its node positions, leg-clear flags and robot node
+    (:func:`_robot_node`), the target's node, and whether the graph has a way from the robot to the target."""
+    G, arrays, regions = _build_graph(cfg, grid, fmap)
+    xy, leg, robot = _robot_node(cfg, grid, robot_xy, G)
     node, snap = _nearest(xy, target_xy)
-    return robot >= 0 and snap <= cfg.target_snap_m and bool(np.isfinite(_path_lengths(arrays, robot)[0][node]))
+    way = robot >= 0 and snap <= cfg.target_snap_m and bool(np.isfinite(_path_lengths(arrays, robot)[0][node]))
+    return G, arrays, regions, xy, leg, robot, node, way
 
 
 def _turning_rad(xy: np.ndarray, yaws: np.ndarray, robot_xy: np.ndarray, robot_yaw: float, here_m: float) -> np.ndarray:
@@ -758,18 +761,15 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
         if not reachable and bumps and cfg.bumps_keep_target:
             # the bump discs alone may cut the way: try the graph without them (SelectionConfig.bumps_keep_target)
             bare = _with_bumps(cfg, grid, jams)
-            G2, arrays2, regions2 = _build_graph(cfg, bare, fmap)
-            xy2, leg2, robot2 = _robot_node(cfg, bare, robot_xy, G2)
-            node2, snap2 = _nearest(xy2, txy)
-            if (robot2 >= 0 and snap2 <= cfg.target_snap_m
-                    and np.isfinite(_path_lengths(arrays2, robot2)[0][node2])):
+            G2, arrays2, regions2, xy2, leg2, robot2, node2, way = _graph_to(cfg, bare, fmap, robot_xy, txy)
+            if way:
                 marked, G, arrays, regions, graph_step = bare, G2, arrays2, regions2, now
                 xy_nodes, leg_clear, robot_node, target_node, reachable = xy2, leg2, robot2, node2, True
         if _at_target(cfg, target, robot_xy, pose.yaw_rad):
             reason = "reached"
         elif not reachable:
             reason = "unreachable"
-            if cfg.cut_hold_local and bumps + jams and _reaches(cfg, grid, robot_xy, txy):
+            if cfg.cut_hold_local and bumps + jams and _graph_to(cfg, grid, None, robot_xy, txy)[-1]:
                 local_until = max(b[2] for b in bumps + jams)     # only the discs cut it (SelectionConfig.cut_hold_local)
         elif count >= cfg.stuck_steps or (cfg.bump_give_up and _bumps_since(cfg, bumps, target.chosen_step)
                                            >= cfg.bump_give_up):
