@@ -76,6 +76,14 @@ class ActionConfig:
     clear_margin_m: float = 0.02
     """A forward step keeps clear when the robot's edge stays this far from the known obstacles along it (or,
     where it stands nearer already, gets no nearer)."""
+    steer_tight: bool = False
+    """:func:`steer_clear` with no heading clear: the robot steps on the heading (within steer_search_deg of the
+    bearing) whose step keeps farthest from the known obstacles, when the map says its body fits there (the
+    smallest distance along the step at least radius_m; clear_margin_m and the no-nearer rule are waived), and
+    turns toward it first. False: the path's own action stays, and the depth check and the bump rule deal with
+    it. Why: a robot that squeezed into a pocket behind furniture (full with selection.cut_hold_local,
+    apartment-01, seed 2, at (8.88, 5.67) m) had no clear heading out; its path's heading grazed a corner
+    0.12 m from the step's end and it bumped there, while the heading 10 deg further kept 0.185 m."""
     stuck_steps: int = 40
     """Steps without leaving a disc of stuck_move_tol_m after which the robot is stuck (above a full turn of steps)."""
     stuck_move_tol_m: float = 0.3
@@ -324,7 +332,14 @@ def steer_clear(pose: RobotPose2D, step: PathStep, clear_m: np.ndarray, origin_x
     d = _step_distances(clear_m, origin_xy_m, cell_m, pose, pose.yaw_rad + js * turn, cfg)
     ok = _clear(d, cell_m, cfg)
     if not ok.any():
-        return step.action
+        if not cfg.steer_tight:
+            return step.action
+        low = d[:, 1:].min(axis=1)
+        best = np.lexsort((np.abs(js), -low))[0]              # farthest from the obstacles, then fewest turns
+        if low[best] < cfg.radius_m:
+            return step.action
+        j = int(js[best])
+        return Action.FORWARD if j == 0 else Action.TURN_LEFT if j > 0 else Action.TURN_RIGHT
     aligned = ok & (err <= max(0.5 * turn, math.radians(cfg.forward_tol_deg)) + 1e-9)
     pool = np.nonzero(aligned if aligned.any() else ok)[0]
     if aligned.any() and d[0, 0] < cfg.radius_m + cfg.clear_margin_m:

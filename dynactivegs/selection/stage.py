@@ -211,6 +211,14 @@ class SelectionConfig:
     2.24 / 93.2 / 23.75; apartment-03 seed 0 the same run (2.28 / 92.2 / 25.32); apartment-01 seed 2 4.43 / 87.5
     / 21.98 -> 4.67 / 74.8 / 18.86 (wedged at one spot from step 355 to the end, every target given up as
     stuck). Off until the wedge is understood and all 12 pairs are measured."""
+    discs_spare_trail: bool = False
+    """Bump and stuck discs leave out the cells within voronoi.robot_radius_m + voronoi.margin_m (and half a
+    cell) of every position the robot has stood at: no static obstacle stands where the robot's body was, so a
+    disc there is a person or a grazed corner, and the way the robot came stays in the graph. Without it a
+    robot that squeezed into a pocket and bumped on the way out lost the pocket's only exit to the disc: no
+    node was left that it could drive to straight, its path started behind a wall, and every try renewed the
+    disc (full with cut_hold_local, apartment-01, seed 2, 1000 steps: at (8.9, 5.7) m from step 327 to the end,
+    65 targets given up as stuck)."""
 
     stuck_disc: bool = True
     """A target given up as stuck (stuck_steps) while the rectangle of the robot's next forward step holds
@@ -455,13 +463,22 @@ def _disc_ahead(cfg: SelectionConfig, robot_xy: np.ndarray, yaw_rad: float) -> t
     return float(centre[0]), float(centre[1])
 
 
-def _mark_bump(cfg: SelectionConfig, grid: OccupancyGrid, centre_xy: np.ndarray) -> OccupancyGrid:
+def _trail_spare_m(cfg: SelectionConfig, cell_m: float) -> float:
+    """How far from a position the robot stood at a disc leaves cells out (``SelectionConfig.discs_spare_trail``):
+    the clearance the graph needs (voronoi.robot_radius_m + voronoi.margin_m) and half a cell."""
+    return cfg.voronoi.robot_radius_m + cfg.voronoi.margin_m + 0.5 * cell_m
+
+
+def _mark_bump(cfg: SelectionConfig, grid: OccupancyGrid, centre_xy: np.ndarray,
+               trail_xy: np.ndarray | None = None) -> OccupancyGrid:
     """The grid with the cells of a disc of ``bump_radius_m`` at ``centre_xy`` set to the occupied clamp.
 
     The obstacle's height is unknown, so the cells get an obstacle top of
     ``occupancy.clear_below_m``: in a grid that kept integrating frames, rays passing over the
     disc would not clear it. :func:`step` marks its bump discs on a copy of the grid for each
-    graph build, so they last ``bump_hold_steps`` whatever the rays do."""
+    graph build, so they last ``bump_hold_steps`` whatever the rays do. ``trail_xy`` (T, 2): positions
+    the robot stood at; with ``discs_spare_trail`` the disc leaves out the cells within
+    :func:`_trail_spare_m` of them."""
     r = cfg.bump_radius_m
     grid = grid.grown_to_include(centre_xy - r, centre_xy + r, cfg.occupancy.grow_chunk_m)
     lo = grid.world_to_cell(centre_xy - r)
@@ -469,7 +486,14 @@ def _mark_bump(cfg: SelectionConfig, grid: OccupancyGrid, centre_xy: np.ndarray)
     ii, jj = np.mgrid[lo[0]:hi[0] + 1, lo[1]:hi[1] + 1]
     ij = np.stack([ii.ravel(), jj.ravel()], axis=1)
     c = grid.cell_to_world(ij)
-    ij = ij[(np.hypot(*(c - centre_xy).T) <= r) & grid.in_bounds(ij)]
+    keep = (np.hypot(*(c - centre_xy).T) <= r) & grid.in_bounds(ij)
+    if cfg.discs_spare_trail and trail_xy is not None and len(trail_xy):
+        spare = _trail_spare_m(cfg, grid.cell_m)
+        near = trail_xy[np.hypot(*(trail_xy - centre_xy).T) <= r + spare]
+        if len(near):
+            gap = np.hypot(c[:, None, 0] - near[None, :, 0], c[:, None, 1] - near[None, :, 1]).min(axis=1)
+            keep &= gap > spare
+    ij = ij[keep]
     logodds = grid.logodds.copy()
     logodds[ij[:, 0], ij[:, 1]] = np.float32(cfg.occupancy.logodds_max)
     top = grid.top_m.copy()
@@ -477,10 +501,11 @@ def _mark_bump(cfg: SelectionConfig, grid: OccupancyGrid, centre_xy: np.ndarray)
     return OccupancyGrid(grid.origin_ij, grid.cell_m, logodds, top)
 
 
-def _with_bumps(cfg: SelectionConfig, grid: OccupancyGrid, bumps: tuple[tuple[float, float, int], ...]) -> OccupancyGrid:
-    """The grid with every kept bump disc marked (:func:`_mark_bump`)."""
+def _with_bumps(cfg: SelectionConfig, grid: OccupancyGrid, bumps: tuple[tuple[float, float, int], ...],
+                trail_xy: np.ndarray | None = None) -> OccupancyGrid:
+    """The grid with every kept bump disc marked (:func:`_mark_bump`, which ``trail_xy`` goes to)."""
     for x, y, _ in bumps:
-        grid = _mark_bump(cfg, grid, np.array([x, y]))
+        grid = _mark_bump(cfg, grid, np.array([x, y]), trail_xy)
     return grid
 
 
@@ -732,7 +757,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
     fmap = motion_floor_map(rec.fields, cfg.um_band_lo_m, cfg.um_band_hi_m) if 0 not in rec.fields.u_m.shape else None
 
     jams = tuple(j for j in state.jams if j[2] > now)
-    marked = _with_bumps(cfg, grid, bumps + jams)       # for the graph and the straight ways to its nodes
+    marked = _with_bumps(cfg, grid, bumps + jams, history)       # for the graph and the straight ways to its nodes
 
     # graph (amortised rebuild)
     G, arrays, regions, graph_step = state.graph, state.arrays, state.regions, state.graph_step
@@ -760,7 +785,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
         reachable = d_snap <= cfg.target_snap_m and np.isfinite(_path_lengths(arrays, robot_node)[0][target_node])
         if not reachable and bumps and cfg.bumps_keep_target:
             # the bump discs alone may cut the way: try the graph without them (SelectionConfig.bumps_keep_target)
-            bare = _with_bumps(cfg, grid, jams)
+            bare = _with_bumps(cfg, grid, jams, history)
             G2, arrays2, regions2, xy2, leg2, robot2, node2, way = _graph_to(cfg, bare, fmap, robot_xy, txy)
             if way:
                 marked, G, arrays, regions, graph_step = bare, G2, arrays2, regions2, now
@@ -777,7 +802,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
             if cfg.stuck_disc and count >= cfg.stuck_steps and _blocked_ahead(cfg, f):
                 # stuck in front of something: keep the next target's way off that spot (SelectionConfig.stuck_disc)
                 jams = jams + (_disc_ahead(cfg, robot_xy, pose.yaw_rad) + (now + cfg.bump_hold_steps,),)
-                marked = _with_bumps(cfg, grid, bumps + jams)
+                marked = _with_bumps(cfg, grid, bumps + jams, history)
                 G, arrays, regions = _build_graph(cfg, marked, fmap)
                 graph_step = now
                 xy_nodes, leg_clear, robot_node = _robot_node(cfg, marked, robot_xy, G)
