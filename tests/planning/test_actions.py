@@ -267,3 +267,42 @@ def test_a_squeezed_robot_turns_for_a_step_that_keeps_a_centimetre_farther_from_
         # -2 deg drifts 0.9 cm closer (within the map's noise, so clear); 8 deg keeps 1.2 cm farther: worth a turn.
         # -1 deg drifts 0.4 cm closer; 9 deg keeps 0.8 cm farther: not worth one.
         assert steer_clear(pose, ps, clear, origin, 0.05, CFG) == want
+
+
+def test_a_robot_with_no_clear_heading_out_of_a_pocket_takes_the_one_its_body_fits_with_steer_tight():
+    # a box up-left (corner 0.28 m behind, 0.08 m to the left of the robot) and a wall 0.35 m to its right: the
+    # way out lies between them, toward a waypoint 15 deg right of straight back. No heading keeps clear_margin_m.
+    box = lambda x, y: (x <= -0.28) & (y >= 0.08)                                   # noqa: E731
+    wall = lambda x, y: box(x, y) | (y <= -0.35)                                     # noqa: E731
+
+    def room(p):                    # the true distance from the robot's centre to the box and the wall
+        dx, dy = max(p.x_m - -0.28, 0.0), max(0.08 - p.y_m, 0.0)
+        return min(math.hypot(dx, dy), p.y_m + 0.35)
+
+    cfg = RobotConfig()
+    tight = ActionConfig(steer_tight=True)
+    outcome = {}
+    for acfg in (CFG, tight):
+        pose, actions = RobotPose2D(0.025, 0.025, math.radians(-170.0)), []
+        for _ in range(4):
+            clear, origin = _window_at(pose, wall)
+            assert not clear_headings(clear, origin, 0.05, pose, pose.yaw_rad + np.radians(np.arange(-4, 5) * 10.0),
+                                      acfg).any() or actions
+            ps = next_action(pose, np.array([[-1.0, -0.25]]), None, acfg)
+            a = steer_clear(pose, ps, clear, origin, 0.05, acfg)
+            actions.append(a)
+            pose = apply_action(pose, a, cfg)
+            if a == Action.FORWARD:
+                break
+        outcome[acfg.steer_tight] = (actions, room(pose))
+    # by the path alone it steps at -170 deg and its body would overlap the box's corner
+    assert outcome[False][0] == [Action.FORWARD] and outcome[False][1] < cfg.radius_m
+    # steer_tight turns twice to -150 deg, where the step keeps the body off both
+    assert outcome[True][0] == [Action.TURN_LEFT, Action.TURN_LEFT, Action.FORWARD]
+    assert outcome[True][1] >= cfg.radius_m
+    # where no heading leaves room for the body, the action stays
+    narrow = lambda x, y: box(x, y) | (y <= -0.25)                                   # noqa: E731
+    pose = RobotPose2D(0.025, 0.025, math.radians(-170.0))
+    clear, origin = _window_at(pose, narrow)
+    ps = next_action(pose, np.array([[-1.0, -0.25]]), None, tight)
+    assert steer_clear(pose, ps, clear, origin, 0.05, tight) == ps.action == Action.FORWARD

@@ -733,6 +733,42 @@ def test_a_bump_disc_never_covers_the_robot_and_its_node_is_one_it_can_drive_to(
     assert out.node_leg_clear[node]
 
 
+def test_with_discs_spare_trail_a_bump_at_the_end_of_an_alcove_leaves_the_way_back_open():
+    # a room (0.5-2.5 m) and a 0.6 m wide alcove east of it; the robot drove down the alcove and, turned to go
+    # back, did not move: a bump. The disc fills the alcove between the robot and the room.
+    free = np.zeros((60, 100), bool)
+    fill(free, 0.5, 0.5, 2.5, 2.5)
+    fill(free, 2.5, 1.2, 3.5, 1.8)
+    fo, mo = fields_for(free, [(0.5, 0.5, 1.5, 2.5, 1.0)], [])
+    pose = (3.2, 1.5, math.pi)
+    trail = np.array([[x, 1.5] for x in np.arange(1.5, 3.2, 0.25)])       # the way it came, up to the last step
+    outs = {}
+    for spare in (False, True):
+        cfg = selection.SelectionConfig(variant="gain_cost", discs_spare_trail=spare)
+        state = state_on(cfg, free, selection.Target((1.0, 1.5), math.pi, "local", 0), pose)
+        state = dataclasses.replace(state, history_xy_m=trail)
+        rec = StepRecord(frame=blind_frame(*pose, step=1),
+                         perception=PerceptionOut(np.full((H, W), 0.1, np.float32), 0.0, False), mapping=mo, fields=fo)
+        state, out = selection.step(cfg, rec, state, derive_rng(0, "sel"))
+        assert len(state.bumps) == 1
+        marked = selection._with_bumps(cfg, state.grid, state.bumps, np.concatenate([trail, [pose[:2]]]))
+        new = marked.occupied(cfg.occupancy) & ~state.grid.occupied(cfg.occupancy)
+        outs[spare] = out, marked.cell_to_world(np.argwhere(new))
+    # without: the disc cuts the robot's end of the alcove off; no graph is left there, nothing to go to
+    out, disc = outs[False]
+    assert len(out.node_xy_m) == 0 and out.mode == "none"
+    assert len(disc) and (np.abs(disc[:, 1] - 1.5) < 0.1).any()
+    # with: the disc keeps only the cells more than 0.245 m from every position the robot stood at, the graph
+    # runs down the alcove, the robot can drive straight to its node, and the target in the room stays
+    out, disc = outs[True]
+    stood = np.concatenate([trail, [pose[:2]]])
+    gap = np.hypot(disc[:, None, 0] - stood[None, :, 0], disc[:, None, 1] - stood[None, :, 1]).min(axis=1)
+    assert len(disc) and (gap > selection._trail_spare_m(cfg, CELL)).all() and len(disc) < len(outs[False][1])
+    assert out.mode == "keep" and out.target_reason == "keep"
+    node = nearest_clear_node(out.node_xy_m, np.array(pose[:2]), out.node_leg_clear)
+    assert out.node_leg_clear[node] and np.hypot(*(out.node_xy_m[node] - pose[:2])) < 0.6
+
+
 def test_a_target_given_up_as_stuck_in_front_of_a_person_leaves_a_disc_the_next_way_avoids():
     free = three_rooms()
     fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0)], [])          # room L, beyond the corridor, is worth seeing
