@@ -1,6 +1,7 @@
 """What more passes of the offline refinement buy, measured on logged runs (open loop: same map, same keyframes).
 
-    python benchmarks/refine_passes.py runs/full/apartment-00-seed0.mcap [more.mcap ...] --passes 3,6,12
+    python benchmarks/refine_passes.py runs/full/apartment-00-seed0.mcap [more.mcap ...] --passes 3,6,12 \
+        [--set mapping.densify_stride=1 ...]
 
 For each run log it re-runs the mapping stage over the logged frames (as ``dagsreplay --from-stage
 mapping`` does: the loop's map, keyframes and Adam moments, exactly), refines the map over the
@@ -9,6 +10,10 @@ keyframe per pass) and measures it with ``dagsbench``'s evaluation at each pass 
 ``--passes``, continuing the same optimisation from one count to the next (the measured copy is
 pruned as the refinement's end prunes it). The ``logged`` row is the run's own refined map; the row
 with the run's ``mapping.refine_passes`` should match it.
+
+``--set`` re-runs mapping with changed ``mapping.*`` settings: a what-if on the same path. Perception's
+outputs stay the logged ones (in the loop, perception compares each frame with the previous map's
+render), so it is open loop for perception as well as for the path.
 
 It prints one Markdown table: per run and pass count, the Gaussians, Acc (cm), C.R. (%), PSNR,
 SSIM, depth L1 (cm), the PSNR over correctly placed pixels (``psnr_right``) and the seconds of
@@ -32,11 +37,11 @@ from psnr_breakdown import logged_config  # noqa: E402  (the same reading of a r
 COLUMNS = ("n_gaussians", "acc_cm", "cr_pct", "psnr_db", "ssim", "depth_l1_cm", "psnr_right_db")
 
 
-def read_run(mcap: Path):
+def read_run(mcap: Path, overrides: tuple[str, ...] = ()):
     """(config, the mapping state after the last step, trajectory (T, 2), logged refined map or None) of a
     run log. The mapping stage is re-run over the logged frames and perception outputs (as
     ``dagsreplay --from-stage mapping`` does), which gives the loop's map, keyframes and Adam moments
-    exactly."""
+    exactly; with ``overrides`` (``mapping.*`` settings) the map of that what-if."""
     from dataclasses import replace
 
     from dynactivegs import pipeline
@@ -44,8 +49,14 @@ def read_run(mcap: Path):
     from dynactivegs.mapping import stage as ms
     from replay.source import LogReader
 
+    from dynactivegs.config import with_overrides
+
     reader = LogReader(mcap)
     cfg = logged_config(reader, mcap)
+    bad = [o for o in overrides if not o.startswith("mapping.")]
+    if bad:
+        raise DagsError(f"--set {bad[0]}: only mapping.* settings change a re-run of the mapping stage")
+    cfg = with_overrides(cfg, list(overrides))
     state = ms.init_state(cfg.mapping)
     traj, prev = [], None
     later = {s.name: None for s in pipeline.STAGES[1:]}
@@ -59,15 +70,17 @@ def read_run(mcap: Path):
     return cfg, state, np.asarray(traj, np.float64).reshape(-1, 2), reader.refined_map()
 
 
-def sweep_run(mcap: Path, passes: list[int], eval_cfg=None) -> tuple[str, list[tuple[str, dict[str, float]]]]:
-    """(a label, [(row name, numbers)]) for one run log: the logged refined map, then each pass count;
-    ``eval_cfg`` (an :class:`~dynactivegs.eval.config.EvalConfig`) defaults to ``dagsbench``'s."""
+def sweep_run(mcap: Path, passes: list[int], eval_cfg=None,
+              overrides: tuple[str, ...] = ()) -> tuple[str, list[tuple[str, dict[str, float]]]]:
+    """(a label, [(row name, numbers)]) for one run log: the logged refined map, then each pass count (of the
+    what-if map with ``overrides``); ``eval_cfg`` (an :class:`~dynactivegs.eval.config.EvalConfig`) defaults to
+    ``dagsbench``'s."""
     from dynactivegs.eval.config import EvalConfig
     from dynactivegs.eval.metrics import SceneEvaluator
     from dynactivegs.mapping import stage as ms
     from dynactivegs.rng import derive_rng
 
-    cfg, state, traj, logged = read_run(mcap)
+    cfg, state, traj, logged = read_run(mcap, overrides)
     g, adam, kfs = state.gaussians, state.adam, state.keyframes
     ev = SceneEvaluator(cfg.sim, eval_cfg or EvalConfig())
     step = len(traj)
@@ -100,6 +113,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("mcap", nargs="+", type=Path, help="run logs (dagsbench writes them under OUT/runs/PRESET/)")
     ap.add_argument("--passes", default="3,6,12", help="comma list of pass counts to measure (default: 3,6,12)")
+    ap.add_argument("--set", nargs="+", default=[], metavar="KEY=VALUE",
+                    help="mapping what-ifs for the re-run, e.g. mapping.densify_stride=1 (open loop)")
     args = ap.parse_args()
     try:
         passes = sorted({int(x) for x in args.passes.split(",") if x.strip()})
@@ -119,7 +134,7 @@ def main() -> None:
         if not path.is_file():
             sys.exit(f"error: {path}: no such file; pass the .mcap of a dagsrun or dagsbench run")
         try:
-            label, rows = sweep_run(path, passes)
+            label, rows = sweep_run(path, passes, overrides=tuple(args.set))
         except DagsError as e:
             sys.exit(f"error: {e}")
         for name, r in rows:
