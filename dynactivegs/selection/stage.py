@@ -212,9 +212,10 @@ class SelectionConfig:
     / 21.98 -> 4.67 / 74.8 / 18.86 (wedged at one spot from step 355 to the end, every target given up as
     stuck). Off until the wedge is understood and all 12 pairs are measured."""
     discs_spare_trail: bool = False
-    """Bump and stuck discs leave out the cells within voronoi.robot_radius_m + voronoi.margin_m (and half a
-    cell) of every position the robot has stood at: no static obstacle stands where the robot's body was, so a
-    disc there is a person or a grazed corner, and the way the robot came stays in the graph. Without it a
+    """Bump discs leave out the cells within voronoi.robot_radius_m + voronoi.margin_m (and half a cell) of every
+    position the robot has stood at: a bump disc stands for a static obstacle the grid lacks, and none stands
+    where the robot's body was, so there it was a person or a grazed corner, and the way the robot came stays in
+    the graph. Stuck discs (stuck_disc) are kept whole: they mark where people stood in the way. Without it a
     robot that squeezed into a pocket and bumped on the way out lost the pocket's only exit to the disc: no
     node was left that it could drive to straight, its path started behind a wall, and every try renewed the
     disc (full with cut_hold_local, apartment-01, seed 2, 1000 steps: at (8.9, 5.7) m from step 327 to the end,
@@ -502,10 +503,13 @@ def _mark_bump(cfg: SelectionConfig, grid: OccupancyGrid, centre_xy: np.ndarray,
 
 
 def _with_bumps(cfg: SelectionConfig, grid: OccupancyGrid, bumps: tuple[tuple[float, float, int], ...],
-                trail_xy: np.ndarray | None = None) -> OccupancyGrid:
-    """The grid with every kept bump disc marked (:func:`_mark_bump`, which ``trail_xy`` goes to)."""
+                trail_xy: np.ndarray | None = None, jams: tuple[tuple[float, float, int], ...] = ()) -> OccupancyGrid:
+    """The grid with every kept bump disc (sparing ``trail_xy``, :func:`_mark_bump`) and stuck disc (``jams``:
+    whole, as they mark where people stood in the way, not a static obstacle) marked."""
     for x, y, _ in bumps:
         grid = _mark_bump(cfg, grid, np.array([x, y]), trail_xy)
+    for x, y, _ in jams:
+        grid = _mark_bump(cfg, grid, np.array([x, y]))
     return grid
 
 
@@ -757,7 +761,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
     fmap = motion_floor_map(rec.fields, cfg.um_band_lo_m, cfg.um_band_hi_m) if 0 not in rec.fields.u_m.shape else None
 
     jams = tuple(j for j in state.jams if j[2] > now)
-    marked = _with_bumps(cfg, grid, bumps + jams, history)       # for the graph and the straight ways to its nodes
+    marked = _with_bumps(cfg, grid, bumps, history, jams)       # for the graph and the straight ways to its nodes
 
     # graph (amortised rebuild)
     G, arrays, regions, graph_step = state.graph, state.arrays, state.regions, state.graph_step
@@ -785,7 +789,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
         reachable = d_snap <= cfg.target_snap_m and np.isfinite(_path_lengths(arrays, robot_node)[0][target_node])
         if not reachable and bumps and cfg.bumps_keep_target:
             # the bump discs alone may cut the way: try the graph without them (SelectionConfig.bumps_keep_target)
-            bare = _with_bumps(cfg, grid, jams, history)
+            bare = _with_bumps(cfg, grid, (), None, jams)
             G2, arrays2, regions2, xy2, leg2, robot2, node2, way = _graph_to(cfg, bare, fmap, robot_xy, txy)
             if way:
                 marked, G, arrays, regions, graph_step = bare, G2, arrays2, regions2, now
@@ -802,7 +806,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
             if cfg.stuck_disc and count >= cfg.stuck_steps and _blocked_ahead(cfg, f):
                 # stuck in front of something: keep the next target's way off that spot (SelectionConfig.stuck_disc)
                 jams = jams + (_disc_ahead(cfg, robot_xy, pose.yaw_rad) + (now + cfg.bump_hold_steps,),)
-                marked = _with_bumps(cfg, grid, bumps + jams, history)
+                marked = _with_bumps(cfg, grid, bumps, history, jams)
                 G, arrays, regions = _build_graph(cfg, marked, fmap)
                 graph_step = now
                 xy_nodes, leg_clear, robot_node = _robot_node(cfg, marked, robot_xy, G)
