@@ -82,8 +82,9 @@ class ActionConfig:
     smallest distance along the step at least radius_m; clear_margin_m and the no-nearer rule are waived), and
     turns toward it first. False: the path's own action stays, and the depth check and the bump rule deal with
     it. Why: a robot that squeezed into a pocket behind furniture (full with selection.cut_hold_local,
-    apartment-01, seed 2, at (8.88, 5.67) m) had no clear heading out; its path's heading grazed a corner
-    0.12 m from the step's end and it bumped there, while the heading 10 deg further kept 0.185 m."""
+    apartment-01, seed 2, at (8.88, 5.67) m) had no clear heading out. Its path's heading (-171 deg) passed a
+    corner 0.13 m from the robot's centre in the map, and it bumped there; -151 deg kept 0.185 m, more than the
+    robot's 0.18 m radius."""
     stuck_steps: int = 40
     """Steps without leaving a disc of stuck_move_tol_m after which the robot is stuck (above a full turn of steps)."""
     stuck_move_tol_m: float = 0.3
