@@ -251,6 +251,23 @@ def test_refine_passes_reproduces_the_runs_refinement_and_goes_on(finished):
     assert r["1 passes"]["seconds"] <= r["3 passes"]["seconds"] <= r["6 passes"]["seconds"]
 
 
+def test_refine_passes_set_re_runs_mapping_with_a_what_if(finished):
+    """refine_passes.py --set: the mapping re-run takes mapping.* overrides (seeding every 4th pixel instead of
+    every 2nd leaves a smaller map than the run's) and refuses any other key in one line."""
+    from dynactivegs.errors import DagsError
+    from dynactivegs.eval.config import EvalConfig
+
+    out, cache = finished
+    mod = _benchmark_module("refine_passes")
+    log = out / "runs" / "full" / "tiny-00-seed0.mcap"
+    ev = EvalConfig(n_views=4, n_gt_points=5000, coverage_points=500, cache_dir=str(cache))
+    _, rows = mod.sweep_run(log, [3], ev, overrides=("mapping.densify_stride=4",))
+    r = dict(rows)
+    assert r["3 passes"]["n_gaussians"] < r["logged"]["n_gaussians"]
+    with pytest.raises(DagsError, match="only mapping"):
+        mod.sweep_run(log, [3], ev, overrides=("selection.variant=random",))
+
+
 def test_occupancy_errors_counts_a_false_obstacle_and_a_cleared_wall():
     """benchmarks/occupancy_errors.py's measure on a constructed case: a 2 m room with a 0.3 m thick wall
     across it; the grid holds one cell of open floor occupied and one cell inside the wall free."""
