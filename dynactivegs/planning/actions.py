@@ -84,7 +84,8 @@ class ActionConfig:
     it. Why: a robot that squeezed into a pocket behind furniture (full with selection.cut_hold_local,
     apartment-01, seed 2, at (8.88, 5.67) m) had no clear heading out. Its path's heading (-171 deg) passed a
     corner 0.13 m from the robot's centre in the map, and it bumped there; -151 deg kept 0.185 m, more than the
-    robot's 0.18 m radius."""
+    robot's 0.18 m radius. Measured together with selection.cut_hold_local and selection.discs_spare_trail (see
+    cut_hold_local); off until baseline is measured with them."""
     stuck_steps: int = 40
     """Steps without leaving a disc of stuck_move_tol_m after which the robot is stuck (above a full turn of steps)."""
     stuck_move_tol_m: float = 0.3

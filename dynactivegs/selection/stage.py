@@ -210,7 +210,10 @@ class SelectionConfig:
     apartment-00 seed 1 3.15 / 76.7 / 17.20 -> 2.29 / 93.7 / 25.52; apartment-01 seed 0 3.77 / 90.9 / 22.46 ->
     2.24 / 93.2 / 23.75; apartment-03 seed 0 the same run (2.28 / 92.2 / 25.32); apartment-01 seed 2 4.43 / 87.5
     / 21.98 -> 4.67 / 74.8 / 18.86 (wedged at one spot from step 355 to the end, every target given up as
-    stuck). Off until the wedge is understood and all 12 pairs are measured."""
+    stuck). That robot was in a pocket behind furniture: see discs_spare_trail and planning.actions.steer_tight.
+    With those two on as well, full over 10 of the 12 pairs (benchmarks/results/apartment-1000-pocket): 2.40 /
+    93.2 / 24.26 against 2.90 / 90.4 / 23.14 at the defaults. Off until the last two pairs and baseline with
+    the three are measured."""
     discs_spare_trail: bool = False
     """Bump discs leave out the cells within voronoi.robot_radius_m + voronoi.margin_m (and half a cell) of every
     position the robot has stood at: a bump disc stands for a static obstacle the grid lacks, and none stands
@@ -219,7 +222,8 @@ class SelectionConfig:
     robot that squeezed into a pocket and bumped on the way out lost the pocket's only exit to the disc: no
     node was left that it could drive to straight, its path started behind a wall, and every try renewed the
     disc (full with cut_hold_local, apartment-01, seed 2, 1000 steps: at (8.9, 5.7) m from step 327 to the end,
-    65 targets given up as stuck)."""
+    65 targets given up as stuck). Measured together with cut_hold_local and planning.actions.steer_tight (see
+    cut_hold_local); off until baseline is measured with them."""
 
     stuck_disc: bool = True
     """A target given up as stuck (stuck_steps) while the rectangle of the robot's next forward step holds
