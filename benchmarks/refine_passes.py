@@ -45,11 +45,10 @@ def read_run(mcap: Path, overrides: tuple[str, ...] = ()):
     from dataclasses import replace
 
     from dynactivegs import pipeline
+    from dynactivegs.config import with_overrides
     from dynactivegs.errors import DagsError
     from dynactivegs.mapping import stage as ms
     from replay.source import LogReader
-
-    from dynactivegs.config import with_overrides
 
     reader = LogReader(mcap)
     cfg = logged_config(reader, mcap)

@@ -765,7 +765,8 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
     fmap = motion_floor_map(rec.fields, cfg.um_band_lo_m, cfg.um_band_hi_m) if 0 not in rec.fields.u_m.shape else None
 
     jams = tuple(j for j in state.jams if j[2] > now)
-    marked = _with_bumps(cfg, grid, bumps, history, jams)       # for the graph and the straight ways to its nodes
+    # for the graph and the straight ways to its nodes
+    marked = _with_bumps(cfg, grid, bumps, trail_xy=history, jams=jams)
 
     # graph (amortised rebuild)
     G, arrays, regions, graph_step = state.graph, state.arrays, state.regions, state.graph_step
@@ -793,7 +794,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
         reachable = d_snap <= cfg.target_snap_m and np.isfinite(_path_lengths(arrays, robot_node)[0][target_node])
         if not reachable and bumps and cfg.bumps_keep_target:
             # the bump discs alone may cut the way: try the graph without them (SelectionConfig.bumps_keep_target)
-            bare = _with_bumps(cfg, grid, (), None, jams)
+            bare = _with_bumps(cfg, grid, (), jams=jams)
             G2, arrays2, regions2, xy2, leg2, robot2, node2, way = _graph_to(cfg, bare, fmap, robot_xy, txy)
             if way:
                 marked, G, arrays, regions, graph_step = bare, G2, arrays2, regions2, now
@@ -810,7 +811,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
             if cfg.stuck_disc and count >= cfg.stuck_steps and _blocked_ahead(cfg, f):
                 # stuck in front of something: keep the next target's way off that spot (SelectionConfig.stuck_disc)
                 jams = jams + (_disc_ahead(cfg, robot_xy, pose.yaw_rad) + (now + cfg.bump_hold_steps,),)
-                marked = _with_bumps(cfg, grid, bumps, history, jams)
+                marked = _with_bumps(cfg, grid, bumps, trail_xy=history, jams=jams)
                 G, arrays, regions = _build_graph(cfg, marked, fmap)
                 graph_step = now
                 xy_nodes, leg_clear, robot_node = _robot_node(cfg, marked, robot_xy, G)
