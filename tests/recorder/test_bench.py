@@ -295,3 +295,28 @@ def test_occupancy_errors_counts_a_false_obstacle_and_a_cleared_wall():
     e = mod.grid_errors(OccupancyGrid((0, 0), 0.05, logodds), cfg, fs, clear_m, inside_m, 0.15)
     assert e["false_occ_m2"] == pytest.approx(0.0025) and e["false_free_m2"] == pytest.approx(0.0025)
     assert e["known_free_pct"] == pytest.approx(100.0 * (free.sum() - 2) / free.sum())
+
+
+def test_path_stats_counts_the_logged_path(finished, capsys):
+    """benchmarks/path_stats.py on the sweep's two runs: one action per step, the collisions dagsbench counted,
+    the robot's distance driven and cells from its logged poses; a missing log is one line."""
+    from dynactivegs.records import robot_pose_of
+    from replay.source import LogReader
+
+    out, _ = finished
+    mod = _benchmark_module("path_stats")
+    for p in ("baseline", "full"):
+        log = out / "runs" / p / "tiny-00-seed0.mcap"
+        label, s = mod.path_stats(log, 0.5)
+        assert label == f"{p} tiny-00 seed 0" and s["steps"] == 6
+        assert s["forward"] + s["turn"] + s["stop"] == 6
+        assert s["collisions"] == json.loads((out / "runs" / p / "tiny-00-seed0.json").read_text())["collisions"]
+        xy = np.array([(q.x_m, q.y_m) for q in (robot_pose_of(st["/frame"]) for st in LogReader(log).steps())])
+        assert s["path_m"] == pytest.approx(np.hypot(*np.diff(xy, axis=0).T).sum())
+        assert s["cells"] == len({tuple(c) for c in np.floor(xy / 0.5).astype(int)}) >= 1
+        assert s["local"] + s["global"] >= 1 and 0.0 <= s["people_pct"] <= 100.0
+    assert mod.main([str(out / "runs" / "full" / "tiny-00-seed0.mcap")]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[0].startswith("| run | path m") and printed[2].startswith("| full tiny-00 seed 0 |")
+    with pytest.raises(SystemExit, match="no such file"):
+        mod.main([str(out / "missing.mcap")])

@@ -1,0 +1,112 @@
+"""How a run's path spent its steps, from its log: where two presets' maps differ by their paths.
+
+    python benchmarks/path_stats.py runs/full/apartment-03-seed1.mcap runs/baseline/apartment-03-seed1.mcap
+
+For each run log it reads the logged poses, selection and planning outputs and the simulator's
+truth and prints one Markdown row:
+
+- **path m**: the distance the robot drove; **cells**: the distinct ``--cell`` m floor cells it
+  stood in (how much of the flat it went through);
+- **targets**: new targets chosen, split by how (``local``: in the robot's subregion, ``global``:
+  in another, eq. 10 for ``full``; for the other scored variants the same split by where the best
+  view lay), and what became of the previous ones: **reached**, **given up** (unreachable, stuck or
+  timed out), and the steps per reached target;
+- **actions**: forward / turn / stop steps, the steps the local collision check blocked, and the
+  steps whose move the simulator stopped (collisions);
+- **people px %**: the share of the camera's pixels that saw a person, over all steps (what the
+  camera spent on what the map must not keep).
+
+Two presets that map the same way (open loop, ``refine_passes.py --set``) but score differently
+closed loop differ here: the map a path allows depends on where it went and what it looked at.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import sys
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from psnr_breakdown import logged_config  # noqa: E402  (the same reading of a run log)
+
+GIVE_UP = ("unreachable", "stuck", "timeout")
+COLUMNS = ("run", "path m", "cells", "targets local / global", "reached", "given up", "steps per reached",
+           "forward / turn / stop", "blocked", "collisions", "people px %")
+
+
+def path_stats(mcap: Path, cell_m: float) -> tuple[str, dict[str, float]]:
+    """(a label, the numbers of the module docstring) of one run log."""
+    from dynactivegs.records import robot_pose_of
+    from dynactivegs.sim.robot import Action
+    from replay.source import LogReader
+
+    reader = LogReader(mcap)
+    cfg = logged_config(reader, mcap)
+    xy, people, reasons, modes = [], [], collections.Counter(), collections.Counter()
+    actions, blocked, collisions = collections.Counter(), 0, 0
+    for st in reader.steps():
+        pose = robot_pose_of(st["/frame"])
+        xy.append((pose.x_m, pose.y_m))
+        truth = st["/truth"]
+        people.append(float(truth.people_mask.mean()))
+        collisions += bool(truth.collided)
+        sel, plan = st.get("/selection"), st.get("/planning")
+        if sel is not None:
+            reasons[sel.target_reason] += 1
+            if sel.target_reason != "keep" and sel.mode in ("local", "global"):
+                modes[sel.mode] += 1
+        if plan is not None:
+            actions[Action(plan.action)] += 1
+            blocked += bool(plan.blocked)
+    if not xy:
+        raise ValueError(f"{mcap}: the log holds no whole step; pass the .mcap of a run that took at least one")
+    pos = np.asarray(xy)
+    reached = reasons["reached"]
+    out = {
+        "steps": len(pos),
+        "path_m": float(np.hypot(*np.diff(pos, axis=0).T).sum()),
+        "cells": len({tuple(c) for c in np.floor(pos / cell_m).astype(np.int64)}),
+        "local": modes["local"], "global": modes["global"],
+        "reached": reached, "given_up": sum(reasons[k] for k in GIVE_UP),
+        "steps_per_reached": len(pos) / reached if reached else float("nan"),
+        "forward": actions[Action.FORWARD], "turn": actions[Action.TURN_LEFT] + actions[Action.TURN_RIGHT],
+        "stop": actions[Action.STOP], "blocked": blocked, "collisions": collisions,
+        "people_pct": 100.0 * float(np.mean(people)),
+    }
+    return f"{reader.metadata.get('preset', '?')} {cfg.sim.scene} seed {cfg.seed}", out
+
+
+def row(label: str, s: dict[str, float]) -> str:
+    return (f"| {label} | {s['path_m']:.1f} | {s['cells']} | {s['local']} / {s['global']} | {s['reached']} | "
+            f"{s['given_up']} | {s['steps_per_reached']:.0f} | {s['forward']} / {s['turn']} / {s['stop']} | "
+            f"{s['blocked']} | {s['collisions']} | {s['people_pct']:.1f} |")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("mcap", nargs="+", type=Path, help="run logs (dagsrun --record, or dagsbench's OUT/runs/PRESET/)")
+    ap.add_argument("--cell", type=float, default=0.5, help="floor cell size (m) for the cells count (default 0.5)")
+    args = ap.parse_args(argv)
+    if not args.cell > 0:
+        sys.exit(f"error: bad --cell {args.cell}: must be > 0 m")
+    from dynactivegs.errors import DagsError
+
+    print("| " + " | ".join(COLUMNS) + " |\n" + "|---" * len(COLUMNS) + "|", flush=True)
+    for path in args.mcap:
+        if not path.is_file():
+            sys.exit(f"error: {path}: no such file; pass the .mcap of a dagsrun or dagsbench run")
+        try:
+            label, stats = path_stats(path, args.cell)
+        except (DagsError, ValueError) as e:
+            sys.exit(f"error: {e}")
+        print(row(label, stats), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
