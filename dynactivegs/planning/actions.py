@@ -76,7 +76,7 @@ class ActionConfig:
     clear_margin_m: float = 0.02
     """A forward step keeps clear when the robot's edge stays this far from the known obstacles along it (or,
     where it stands nearer already, gets no nearer)."""
-    steer_tight: bool = False
+    steer_tight: bool = True
     """:func:`steer_clear` with no heading clear: the robot steps on the heading (within steer_search_deg of the
     bearing) whose step keeps farthest from the known obstacles, when the map says its body fits there (the
     smallest distance along the step at least radius_m; clear_margin_m and the no-nearer rule are waived), and
@@ -85,7 +85,7 @@ class ActionConfig:
     apartment-01, seed 2, at (8.88, 5.67) m) had no clear heading out. Its path's heading (-171 deg) passed a
     corner 0.13 m from the robot's centre in the map, and it bumped there; -151 deg kept 0.185 m, more than the
     robot's 0.18 m radius. Measured together with selection.cut_hold_local and selection.discs_spare_trail (see
-    cut_hold_local); off until baseline is measured with them."""
+    cut_hold_local); on by default with them."""
     stuck_steps: int = 40
     """Steps without leaving a disc of stuck_move_tol_m after which the robot is stuck (above a full turn of steps)."""
     stuck_move_tol_m: float = 0.3

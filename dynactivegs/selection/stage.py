@@ -199,7 +199,7 @@ class SelectionConfig:
     at the doorway by people pressing on the robot, the stuck give-up's disc cut the west off). Mean of the 4
     (Acc cm / C.R. % / PSNR dB): 3.30 / 85.09 / 21.24 off, 3.38 / 83.38 / 19.73 on, so it stays off."""
 
-    cut_hold_local: bool = False
+    cut_hold_local: bool = True
     """A target given up as unreachable where only the bump and stuck discs cut the way (the graph without them
     still reaches it): until those discs are let go, every new target is the best view of the robot's own
     subregion (whatever its score; elsewhere only when the subregion has none), not a view in a far subregion.
@@ -211,10 +211,10 @@ class SelectionConfig:
     2.24 / 93.2 / 23.75; apartment-03 seed 0 the same run (2.28 / 92.2 / 25.32); apartment-01 seed 2 4.43 / 87.5
     / 21.98 -> 4.67 / 74.8 / 18.86 (wedged at one spot from step 355 to the end, every target given up as
     stuck). That robot was in a pocket behind furniture: see discs_spare_trail and planning.actions.steer_tight.
-    With those two on as well, full over 10 of the 12 pairs (benchmarks/results/apartment-1000-pocket): 2.40 /
-    93.2 / 24.26 against 2.90 / 90.4 / 23.14 at the defaults. Off until the last two pairs and baseline with
-    the three are measured."""
-    discs_spare_trail: bool = False
+    With those two on as well (benchmarks/results/apartment-1000-pocket, 12 pairs, 1000 steps), full: 2.51 / 92.5 /
+    23.93 against 2.82 / 90.7 / 23.22 with the three off, collisions 26.2 against 22.6 per run; baseline: 3.45 /
+    89.5 / 22.65 against 3.41 / 90.5 / 23.61. On together by default."""
+    discs_spare_trail: bool = True
     """Bump discs leave out the cells within voronoi.robot_radius_m + voronoi.margin_m (and half a cell) of every
     position the robot has stood at: a bump disc stands for a static obstacle the grid lacks, and none stands
     where the robot's body was, so there it was a person or a grazed corner, and the way the robot came stays in
@@ -223,7 +223,7 @@ class SelectionConfig:
     node was left that it could drive to straight, its path started behind a wall, and every try renewed the
     disc (full with cut_hold_local, apartment-01, seed 2, 1000 steps: at (8.9, 5.7) m from step 327 to the end,
     65 targets given up as stuck). Measured together with cut_hold_local and planning.actions.steer_tight (see
-    cut_hold_local); off until baseline is measured with them."""
+    cut_hold_local); on by default with them."""
 
     stuck_disc: bool = True
     """A target given up as stuck (stuck_steps) while the rectangle of the robot's next forward step holds

@@ -282,7 +282,7 @@ def test_a_robot_with_no_clear_heading_out_of_a_pocket_takes_the_one_its_body_fi
     cfg = RobotConfig()
     tight = ActionConfig(steer_tight=True)
     outcome = {}
-    for acfg in (CFG, tight):
+    for acfg in (ActionConfig(steer_tight=False), tight):
         pose, actions = RobotPose2D(0.025, 0.025, math.radians(-170.0)), []
         for _ in range(4):
             clear, origin = _window_at(pose, wall)
