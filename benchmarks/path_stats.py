@@ -9,8 +9,8 @@ truth and prints one Markdown row:
   stood in (how much of the flat it went through);
 - **targets**: new targets chosen, split by how (``local``: in the robot's subregion, ``global``:
   in another, eq. 10 for ``full``; for the other scored variants the same split by where the best
-  view lay), and what became of the previous ones: **reached**, **given up** (unreachable, stuck or
-  timed out), and the steps per reached target;
+  view lay; ``random`` and ``frontier`` choices are not counted), and what became of the previous
+  ones: **reached**, **given up** (unreachable, stuck or timed out), and the steps per reached target;
 - **actions**: forward / turn / stop steps, the steps the local collision check blocked, and the
   steps whose move the simulator stopped (collisions);
 - **people px %**: the share of the camera's pixels that saw a person, over all steps (what the
