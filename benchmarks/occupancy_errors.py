@@ -112,8 +112,6 @@ def main() -> None:
     print("| run | config | step | false occupied m2 | false free m2 | known free % |\n|---|---|---|---|---|---|",
           flush=True)
     for path in args.mcap:
-        if not path.is_file():
-            sys.exit(f"error: {path}: no such file; pass the .mcap of a dagsrun or dagsbench run")
         try:
             label, out = run_errors(path, args.set, args.margin)
         except DagsError as e:

@@ -98,8 +98,6 @@ def main(argv: list[str] | None = None) -> int:
 
     print("| " + " | ".join(COLUMNS) + " |\n" + "|---" * len(COLUMNS) + "|", flush=True)
     for path in args.mcap:
-        if not path.is_file():
-            sys.exit(f"error: {path}: no such file; pass the .mcap of a dagsrun or dagsbench run")
         try:
             label, stats = path_stats(path, args.cell)
         except (DagsError, ValueError) as e:

@@ -318,5 +318,5 @@ def test_path_stats_counts_the_logged_path(finished, capsys):
     assert mod.main([str(out / "runs" / "full" / "tiny-00-seed0.mcap")]) == 0
     printed = capsys.readouterr().out.splitlines()
     assert printed[0].startswith("| run | path m") and printed[2].startswith("| full tiny-00 seed 0 |")
-    with pytest.raises(SystemExit, match="no such file"):
+    with pytest.raises(SystemExit, match="log not found"):
         mod.main([str(out / "missing.mcap")])
