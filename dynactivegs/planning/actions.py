@@ -21,6 +21,7 @@ Actions are :class:`dynactivegs.sim.robot.Action`; yaw is counter-clockwise from
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -86,6 +87,16 @@ class ActionConfig:
     corner 0.13 m from the robot's centre in the map, and it bumped there; -151 deg kept 0.185 m, more than the
     robot's 0.18 m radius. Measured together with selection.cut_hold_local and selection.discs_spare_trail (see
     cut_hold_local); on by default with them."""
+    steer_skip_blocked: bool = False
+    """:func:`steer_clear` does not take a heading on which the robot was blocked from where it stands (the
+    camera saw the step blocked, or the step failed: the planner's remembered blocked spots,
+    planning.block_hold_steps long), unless it faces that heading and the block is from this step or the last
+    one (it is waiting for the way to clear, or tries a step once more before bump_evade_after). Without it, the
+    depth check and the map can disagree for good: motion_view on apartment-01, seed 0, 1000 steps, in a pocket
+    at (8.79, 5.62) m, turned between -152.8 and -162.8 deg from step 300 to the end (50.2 % C.R.). At -152.8
+    the camera saw the step blocked and the robot turned to aim exactly at its path (-163 deg); at -162.8 the
+    map said that step comes too near an obstacle and -152.8 does not, and it turned back. False: the map
+    alone chooses the heading."""
     stuck_steps: int = 40
     """Steps without leaving a disc of stuck_move_tol_m after which the robot is stuck (above a full turn of steps)."""
     stuck_move_tol_m: float = 0.3
@@ -304,7 +315,7 @@ def clear_headings(clear_m: np.ndarray, origin_xy_m: np.ndarray, cell_m: float, 
 
 
 def steer_clear(pose: RobotPose2D, step: PathStep, clear_m: np.ndarray, origin_xy_m: np.ndarray, cell_m: float,
-                cfg: ActionConfig) -> Action:
+                cfg: ActionConfig, blocked_yaws_rad: Sequence[float] = ()) -> Action:
     """The action of ``step`` (from :func:`next_action`), or a turn toward a heading whose step keeps clear.
 
     Applies when the robot goes for a waypoint (``step.aim_rad`` set, a forward step or a turn toward it)
@@ -319,7 +330,8 @@ def steer_clear(pose: RobotPose2D, step: PathStep, clear_m: np.ndarray, origin_x
     graze; a centimetre's gain is worth a turn step, less is not (in a passage barely wider than that
     the robot would zig-zag from side to side). With every heading clear this is what
     :func:`next_action` does; with none, the action stays (the depth check and the bump rule deal
-    with it).
+    with it). ``blocked_yaws_rad``: headings never to take (those within half a turn step of one), from
+    ``cfg.steer_skip_blocked``; the caller picks them.
     """
     if (step.aim_rad is None or clear_m.size == 0 or cfg.steer_search_deg <= 0.0
             or step.action not in (Action.FORWARD, Action.TURN_LEFT, Action.TURN_RIGHT)):
@@ -333,10 +345,14 @@ def steer_clear(pose: RobotPose2D, step: PathStep, clear_m: np.ndarray, origin_x
     err = np.abs(err0 - js * turn)
     d = _step_distances(clear_m, origin_xy_m, cell_m, pose, pose.yaw_rad + js * turn, cfg)
     ok = _clear(d, cell_m, cfg)
+    barred = np.zeros(len(js), bool)
+    for y in blocked_yaws_rad:
+        barred |= np.abs(wrap_angle(pose.yaw_rad + js * turn - y)) <= 0.5 * turn + 1e-6
+    ok &= ~barred
     if not ok.any():
         if not cfg.steer_tight:
             return step.action
-        low = d[:, 1:].min(axis=1)
+        low = np.where(barred, -np.inf, d[:, 1:].min(axis=1))
         best = np.lexsort((np.abs(js), -low))[0]              # farthest from the obstacles, then fewest turns
         if low[best] < cfg.radius_m:
             return step.action

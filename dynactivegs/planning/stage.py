@@ -285,9 +285,30 @@ def _plan(cfg: PlanningConfig, sel: SelectionOut, now_map: FloorMap | None, ema_
     return wp.astype(np.float64), float(total)
 
 
-def _steer(pose: RobotPose2D, ps: PathStep, sel: SelectionOut, acfg: ActionConfig) -> Action:
-    """``ps``'s action, or a turn toward a heading whose step keeps clear of the known obstacles around the robot."""
-    return steer_clear(pose, ps, sel.local_clear_m, sel.local_origin_xy_m, sel.local_cell_m, acfg)
+def _steer(cfg: PlanningConfig, pose: RobotPose2D, ps: PathStep, sel: SelectionOut, blocks, now: int) -> Action:
+    """``ps``'s action, or a turn toward a heading whose step keeps clear of the known obstacles around the robot
+    (with ``actions.steer_skip_blocked``, not one it was blocked on from here: :func:`_blocked_yaws`)."""
+    barred = _blocked_yaws(cfg, blocks, pose, now) if cfg.actions.steer_skip_blocked else ()
+    return steer_clear(pose, ps, sel.local_clear_m, sel.local_origin_xy_m, sel.local_cell_m, cfg.actions, barred)
+
+
+def _blocked_yaws(cfg: PlanningConfig, blocks, pose: RobotPose2D, now: int) -> list[float]:
+    """Headings the robot was blocked on from where it stands (``actions.steer_skip_blocked``). A blocked spot is
+    remembered one forward step and the robot's radius ahead of where the robot stood, so one at that distance
+    (within bump_tol_m: the robot has not moved since) lies on the heading it was blocked on. A block on the
+    heading the robot faces, from this step or the last, is left out: the robot waits there, or tries again."""
+    reach = cfg.actions.forward_step_m + cfg.actions.radius_m
+    half = 0.5 * math.radians(cfg.actions.turn_step_deg)
+    out = []
+    for x, y, until in blocks:
+        dx, dy = x - pose.x_m, y - pose.y_m
+        if abs(math.hypot(dx, dy) - reach) > cfg.bump_tol_m:
+            continue
+        yaw = math.atan2(dy, dx)
+        if until - cfg.block_hold_steps >= now - 1 and abs(wrap_angle(yaw - pose.yaw_rad)) <= half + 1e-6:
+            continue
+        out.append(yaw)
+    return out
 
 
 def _evade_turn(cfg: PlanningConfig, rec: StepRecord, now_map: FloorMap | None, robot_xy: np.ndarray,
@@ -392,7 +413,7 @@ def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
         prefer = Action(state.last_action) if state.last_action in (int(Action.TURN_LEFT), int(Action.TURN_RIGHT)) \
             else None
         ps = next_action(pose, path[k:], sel.target_yaw_rad, acfg, prefer)
-        action, k = _steer(pose, ps, sel, acfg), k + ps.next_waypoint
+        action, k = _steer(cfg, pose, ps, sel, blocks, now), k + ps.next_waypoint
         blocked = False
         seen_block = action == Action.FORWARD and forward_blocked(f.depth_m, f.K, f.T_world_cam, acfg)
         if action == Action.FORWARD and (seen_block or _block_ahead(blocks, robot_xy, fwd, acfg)):
@@ -404,7 +425,7 @@ def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
             path, cost = _plan(cfg, sel, now_map, ema_map, blocks, robot_xy, pose.yaw_rad)
             k, planned_step, replanned = 0, now, True
             ps = next_action(pose, path, sel.target_yaw_rad, acfg, prefer)
-            action, k = _steer(pose, ps, sel, acfg), ps.next_waypoint
+            action, k = _steer(cfg, pose, ps, sel, blocks, now), ps.next_waypoint
             if action == Action.FORWARD and seen_block:
                 # Still forward into what the camera sees. First aim exactly (a step at up to
                 # forward_tol_deg off can graze a door jamb the aligned step clears), then wait.

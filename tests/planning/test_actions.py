@@ -306,3 +306,20 @@ def test_a_robot_with_no_clear_heading_out_of_a_pocket_takes_the_one_its_body_fi
     clear, origin = _window_at(pose, narrow)
     ps = next_action(pose, np.array([[-1.0, -0.25]]), None, tight)
     assert steer_clear(pose, ps, clear, origin, 0.05, tight) == ps.action == Action.FORWARD
+
+
+def test_a_heading_blocked_from_here_is_not_taken_with_steer_skip_blocked():
+    # the wall along y = 0.4 and a waypoint 7 deg toward it: at 1 deg the step keeps clear and is within
+    # forward_tol_deg, so the map alone steps forward there
+    clear, origin = _window((-0.6, -0.6), 24, 0.05, lambda x, y: y >= 0.4)
+    pose = RobotPose2D(0.0, 0.175, math.radians(1.0))
+    ps = next_action(pose, np.array([[3.0, 0.175 + 3.0 * math.tan(math.radians(7.0))]]), None, CFG)
+    assert steer_clear(pose, ps, clear, origin, 0.05, CFG) == Action.FORWARD
+    # the camera saw that step blocked: 11 deg grazes the wall, so it turns to -9 deg, the next clear heading
+    assert steer_clear(pose, ps, clear, origin, 0.05, CFG, [math.radians(1.0)]) == Action.TURN_RIGHT
+    assert steer_clear(pose, ps, clear, origin, 0.05, CFG, [math.radians(1.0), math.radians(-9.0)]) == Action.TURN_RIGHT
+    # a heading only near one blocked (more than half a turn step off) stays a candidate
+    assert steer_clear(pose, ps, clear, origin, 0.05, CFG, [math.radians(7.0)]) == Action.FORWARD
+    # with every heading that keeps clear barred, steer_tight takes none of the barred ones either
+    every = list(pose.yaw_rad + np.radians(np.arange(-6, 6) * 10.0))
+    assert steer_clear(pose, ps, clear, origin, 0.05, CFG, every) == ps.action == Action.FORWARD

@@ -68,3 +68,26 @@ def test_three_stages_replay_bit_identically_from_recorded_inputs():
             for x, y in zip(oa, ob):
                 assert _same(x, y), f"{variant}: step {t} {type(x).__name__} differs"
         assert any(len(s.cand_score) for _, s, _ in a) or variant == "random"
+
+
+def test_the_headings_barred_by_steer_skip_blocked_leave_a_fresh_block_straight_ahead_alone():
+    # blocked spots are remembered one forward step and the radius (0.43 m) ahead of where the robot stood
+    import math
+    from dynactivegs.records import RobotPose2D
+    cfg = planning.PlanningConfig()
+    reach = cfg.actions.forward_step_m + cfg.actions.radius_m
+    hold, now = cfg.block_hold_steps, 100
+    pose = RobotPose2D(1.0, 2.0, math.radians(30.0))
+
+    def spot(deg, made, dist=reach):
+        return (1.0 + dist * math.cos(math.radians(deg)), 2.0 + dist * math.sin(math.radians(deg)), made + hold)
+
+    yaws = lambda blocks: sorted(round(math.degrees(y)) for y in planning._blocked_yaws(cfg, blocks, pose, now))  # noqa: E731
+    # straight ahead, seen this step or the last: the robot waits there (or tries once more), not barred
+    assert yaws((spot(30, now), spot(30, now - 1))) == []
+    # straight ahead but from before it turned away and back: barred (the depth check and the map disagreed)
+    assert yaws((spot(30, now - 2),)) == [30]
+    # another heading blocked from here, however fresh: barred
+    assert yaws((spot(40, now - 1), spot(-150, now - 5))) == [-150, 40]
+    # a spot remembered from somewhere else (not one step and a radius away) says nothing about this place
+    assert yaws((spot(30, now - 3, dist=reach + 0.2), spot(60, now - 3, dist=0.1))) == []
