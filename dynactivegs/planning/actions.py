@@ -95,8 +95,10 @@ class ActionConfig:
     depth check and the map can disagree for good: motion_view on apartment-01, seed 0, 1000 steps, in a pocket
     at (8.79, 5.62) m, turned between -152.8 and -162.8 deg from step 300 to the end (50.2 % C.R.). At -152.8
     the camera saw the step blocked and the robot turned to aim exactly at its path (-163 deg); at -162.8 the
-    map said that step comes too near an obstacle and -152.8 does not, and it turned back. False: the map
-    alone chooses the heading."""
+    map said that step comes too near an obstacle and -152.8 does not, and it turned back (`full` and
+    plan_dyn_edge made the same run). With it, that run reached the same spot at step 410 and left it at step 479
+    (3.78 cm / 88.2 % / 22.49 dB; benchmarks/results/apartment-1000-ablation). Not measured on other pairs yet,
+    so off. False: the map alone chooses the heading."""
     stuck_steps: int = 40
     """Steps without leaving a disc of stuck_move_tol_m after which the robot is stuck (above a full turn of steps)."""
     stuck_move_tol_m: float = 0.3
