@@ -200,13 +200,18 @@ def _segment_point_dist(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarr
     return np.hypot(*(a + t[:, None] * ab - p).T)
 
 
+def _block_reach(acfg: ActionConfig) -> float:
+    """How far ahead of the robot a blocked spot is remembered: one forward step and the robot's radius."""
+    return acfg.forward_step_m + acfg.radius_m
+
+
 def _block_ahead(blocks, robot_xy: np.ndarray, fwd: np.ndarray, acfg: ActionConfig) -> bool:
     """Whether a remembered blocked spot lies in the rectangle one forward step sweeps (as in forward_blocked)."""
     for x, y, _ in blocks:
         rel = np.array([x, y]) - robot_xy
         ahead = float(rel @ fwd)
         side = float(rel[0] * -fwd[1] + rel[1] * fwd[0])
-        if 0.0 < ahead <= acfg.forward_step_m + acfg.radius_m + 1e-9 and abs(side) <= acfg.radius_m:
+        if 0.0 < ahead <= _block_reach(acfg) + 1e-9 and abs(side) <= acfg.radius_m:
             return True
     return False
 
@@ -297,7 +302,7 @@ def _blocked_yaws(cfg: PlanningConfig, blocks, pose: RobotPose2D, now: int) -> l
     remembered one forward step and the robot's radius ahead of where the robot stood, so one at that distance
     (within bump_tol_m: the robot has not moved since) lies on the heading it was blocked on. A block on the
     heading the robot faces, from this step or the last, is left out: the robot waits there, or tries again."""
-    reach = cfg.actions.forward_step_m + cfg.actions.radius_m
+    reach = _block_reach(cfg.actions)
     half = 0.5 * math.radians(cfg.actions.turn_step_deg)
     out = []
     for x, y, until in blocks:
@@ -360,7 +365,7 @@ def step(cfg: PlanningConfig, rec: StepRecord, state: PlanningState | None,
               else math.hypot(robot_xy[0] - state.last_xy_m[0], robot_xy[1] - state.last_xy_m[1]))
     bumped = state.last_action == int(Action.FORWARD) and step_m < cfg.bump_tol_m
     fwd = np.array([math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)])
-    ahead = robot_xy + fwd * (acfg.forward_step_m + acfg.radius_m)
+    ahead = robot_xy + fwd * _block_reach(acfg)
     if bumped:
         blocks = blocks + ((float(ahead[0]), float(ahead[1]), now + cfg.block_hold_steps),)
     moved = state.last_xy_m is not None and step_m >= cfg.bump_tol_m
