@@ -498,6 +498,35 @@ def test_a_target_cut_off_only_by_a_disc_holds_new_targets_in_the_robots_subregi
         select(False, step=30, target=reached)[0].target
 
 
+def test_with_global_beats_local_a_far_subregion_wins_only_with_a_better_view_than_the_robots_own():
+    free = np.zeros((60, 240), bool)                                 # rooms L, C, R, RR in a row; the robot in C
+    for x0 in (0.5, 3.5, 6.5, 9.5):
+        fill(free, x0, 0.5, x0 + 2.0, 2.5)
+    for x0 in (2.5, 5.5, 8.5):
+        fill(free, x0, 1.2, x0 + 1.0, 1.8)
+
+    def select(beat: bool, gain_rr: float) -> SelectionOut:
+        fo, mo = fields_for(free, [(3.5, 2.2, 5.5, 2.5, 1.0), (9.5, 0.5, 11.5, 2.5, gain_rr)], [])
+        cfg = selection.SelectionConfig(global_beats_local=beat, local_threshold=1e9,   # never local by eq. (7) alone
+                                        subregions=SubregionConfig(cut_distance=3.0))
+        return select_once(cfg, free, fo, mo, (4.5, 1.5))
+
+    def region_at(out: SelectionOut, xy) -> int:
+        return int(out.node_region[np.argmin(np.hypot(*(out.node_xy_m - np.asarray(xy)).T))])
+
+    # little to see in RR: eq. (10) still leaves the robot's subregion, for views worse than its own best
+    off, on = select(False, 0.1), select(True, 0.1)
+    assert off.mode == "global" and region_at(off, off.target_xy_m) != region_at(off, (4.5, 1.5))
+    assert off.cand_score[off.cand_node == off.target_node].max() < off.cand_score.max()
+    best = int(np.argmax(on.cand_score))
+    assert on.mode == "local" and on.target_node == on.cand_node[best]
+    assert region_at(on, on.target_xy_m) == region_at(on, (4.5, 1.5))
+    # RR rich: its best view beats the robot's subregion, and the robot goes there either way
+    off, on = select(False, 1.0), select(True, 1.0)
+    assert on.mode == off.mode == "global" and on.target_xy_m[0] > 8.0
+    np.testing.assert_array_equal(on.target_xy_m, off.target_xy_m)
+
+
 def test_standing_still_before_something_moving_is_a_wait_not_a_bump():
     free = three_rooms()
     fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0)], [])
