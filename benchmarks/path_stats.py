@@ -16,6 +16,11 @@ truth and prints one Markdown row:
 - **people px %**: the share of the camera's pixels that saw a person, over all steps (what the
   camera spent on what the map must not keep).
 
+With ``--metrics`` each row also gets the run's refined C.R. and PSNR (from the metrics file ``dagsbench``
+wrote beside the log), and a last line gives the rank correlation (Spearman) of path m, cells and reached
+targets with PSNR over the runs, each taken relative to its scene's mean (scenes differ in how high PSNR can
+go): which of the path's traits go with a better map.
+
 Two presets that map the same way (open loop, ``refine_passes.py --set``) but score differently
 closed loop differ here: the map a path allows depends on where it went and what it looked at.
 """
@@ -24,6 +29,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import json
 import sys
 from pathlib import Path
 
@@ -81,6 +87,45 @@ def path_stats(mcap: Path, cell_m: float) -> tuple[str, dict[str, float]]:
     return f"{reader.metadata.get('preset', '?')} {cfg.sim.scene} seed {cfg.seed}", out
 
 
+def run_metrics(mcap: Path) -> tuple[float, float]:
+    """(C.R. %, PSNR dB) at the last checkpoint of the metrics file dagsbench wrote beside ``mcap``."""
+    path = mcap.with_suffix(".json")
+    if not path.is_file():
+        raise ValueError(f"no metrics file {path} beside the log; pass logs from dagsbench's OUT/runs/PRESET/ "
+                         "or leave out --metrics")
+    try:
+        last = json.loads(path.read_text())["checkpoints"][-1]
+        return float(last["cr_pct"]), float(last["psnr_db"])
+    except (ValueError, KeyError, IndexError, TypeError) as e:
+        raise ValueError(f"metrics file {path} is not dagsbench's ({type(e).__name__}: {e}); "
+                         "re-run dagsbench --reevaluate for that run") from e
+
+
+TRAITS = ("path_m", "cells", "reached")
+
+
+def within_scene_correlations(runs: list[tuple[str, dict[str, float], float]]
+                               ) -> tuple[dict[str, tuple[float, float]], int] | None:
+    """Spearman (rho, p) of each of TRAITS with PSNR over ``runs`` (scene, stats, psnr_db), every value taken
+    relative to its scene's mean, and how many runs that was (those of scenes with 2 runs or more); None when
+    that is fewer than 3."""
+    from scipy.stats import spearmanr
+
+    by_scene: dict[str, list[tuple[dict[str, float], float]]] = collections.defaultdict(list)
+    for scene, stats, psnr in runs:
+        by_scene[scene].append((stats, psnr))
+    groups = [g for g in by_scene.values() if len(g) >= 2]
+    if sum(len(g) for g in groups) < 3:
+        return None
+    psnr = np.concatenate([np.array([p for _, p in g]) - np.mean([p for _, p in g]) for g in groups])
+    out = {}
+    for t in TRAITS:
+        x = np.concatenate([np.array([s[t] for s, _ in g], float) - np.mean([s[t] for s, _ in g]) for g in groups])
+        rho, p = spearmanr(x, psnr)
+        out[t] = (float(rho), float(p))
+    return out, len(psnr)
+
+
 def row(label: str, s: dict[str, float]) -> str:
     return (f"| {label} | {s['path_m']:.1f} | {s['cells']} | {s['local']} / {s['global']} | {s['reached']} | "
             f"{s['given_up']} | {s['steps_per_reached']:.0f} | {s['forward']} / {s['turn']} / {s['stop']} | "
@@ -91,18 +136,33 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("mcap", nargs="+", type=Path, help="run logs (dagsrun --record, or dagsbench's OUT/runs/PRESET/)")
     ap.add_argument("--cell", type=float, default=0.5, help="floor cell size (m) for the cells count (default 0.5)")
+    ap.add_argument("--metrics", action="store_true",
+                    help="add each run's C.R. and PSNR from its metrics file, and the traits' correlation with PSNR")
     args = ap.parse_args(argv)
     if not args.cell > 0:
         sys.exit(f"error: bad --cell {args.cell}: must be > 0 m")
     from dynactivegs.errors import DagsError
 
-    print("| " + " | ".join(COLUMNS) + " |\n" + "|---" * len(COLUMNS) + "|", flush=True)
+    columns = COLUMNS + (("C.R. %", "PSNR dB") if args.metrics else ())
+    print("| " + " | ".join(columns) + " |\n" + "|---" * len(columns) + "|", flush=True)
+    runs = []
     for path in args.mcap:
         try:
             label, stats = path_stats(path, args.cell)
+            metrics = run_metrics(path) if args.metrics else None
         except (DagsError, ValueError) as e:
             sys.exit(f"error: {e}")
-        print(row(label, stats), flush=True)
+        line = row(label, stats)
+        if metrics is not None:
+            line += f" {metrics[0]:.1f} | {metrics[1]:.2f} |"
+            runs.append((label.split(" ")[1], stats, metrics[1]))
+        print(line, flush=True)
+    if args.metrics:
+        corr = within_scene_correlations(runs)
+        print("\nwithin-scene rank correlation with PSNR: " + (
+            "needs 3 runs or more in scenes with 2 or more" if corr is None else
+            ", ".join(f"{t.replace('_', ' ')} {rho:+.2f} (p {p:.2g})" for t, (rho, p) in corr[0].items())
+            + f" over {corr[1]} runs"))
     return 0
 
 

@@ -320,3 +320,34 @@ def test_path_stats_counts_the_logged_path(finished, capsys):
     assert printed[0].startswith("| run | path m") and printed[2].startswith("| full tiny-00 seed 0 |")
     with pytest.raises(SystemExit, match="log not found"):
         mod.main([str(out / "missing.mcap")])
+    capsys.readouterr()
+    # --metrics: each run's refined C.R. and PSNR from dagsbench's metrics file beside the log
+    logs = [str(out / "runs" / p / "tiny-00-seed0.mcap") for p in ("baseline", "full")]
+    assert mod.main(["--metrics", *logs]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[0].endswith("| C.R. % | PSNR dB |")
+    last = json.loads((out / "runs" / "full" / "tiny-00-seed0.json").read_text())["checkpoints"][-1]
+    assert printed[3].endswith(f"| {last['cr_pct']:.1f} | {last['psnr_db']:.2f} |")
+    assert printed[-1].endswith("needs 3 runs or more in scenes with 2 or more")     # two runs of one scene
+
+
+def test_path_stats_correlates_path_traits_with_psnr_within_each_scene(tmp_path):
+    """Scenes differ in how high PSNR goes: the correlation is taken relative to each scene's mean, so a scene
+    with more cells and less PSNR than another does not hide more cells going with more PSNR within both."""
+    mod = _benchmark_module("path_stats")
+    stats = lambda cells, reached: {"path_m": 2.0 * cells, "cells": cells, "reached": reached}
+    runs = [("a", stats(10, 5), 20.0), ("a", stats(20, 3), 21.0), ("a", stats(30, 4), 22.0),
+            ("b", stats(110, 3), 10.0), ("b", stats(120, 5), 11.0), ("b", stats(130, 4), 12.0),
+            ("c", stats(500, 9), 0.0)]                                            # one run: no mean to compare with
+    corr, n = mod.within_scene_correlations(runs)
+    assert n == 6 and corr["cells"][0] == pytest.approx(1.0) and corr["path_m"][0] == pytest.approx(1.0)
+    assert abs(corr["reached"][0]) < 0.5
+    from scipy.stats import spearmanr
+    assert spearmanr([r[1]["cells"] for r in runs], [r[2] for r in runs])[0] < 0   # pooled raw values: the other way
+    assert mod.within_scene_correlations(runs[:2] + runs[-1:]) is None
+    log = tmp_path / "run.mcap"
+    log.with_suffix(".json").write_text("{}")
+    with pytest.raises(ValueError, match="is not dagsbench's"):
+        mod.run_metrics(log)
+    with pytest.raises(ValueError, match="no metrics file"):
+        mod.run_metrics(tmp_path / "other.mcap")
