@@ -51,6 +51,16 @@ def three_rooms():
     return free
 
 
+def four_rooms():
+    """Rooms L, C, R, RR (2 x 2 m) in a row, joined by 1 m corridors."""
+    free = np.zeros((60, 240), bool)
+    for x0 in (0.5, 3.5, 6.5, 9.5):
+        fill(free, x0, 0.5, x0 + 2.0, 2.5)
+    for x0 in (2.5, 5.5, 8.5):
+        fill(free, x0, 1.2, x0 + 1.0, 1.8)
+    return free
+
+
 def fields_for(free: np.ndarray, gain_boxes, busy_boxes) -> tuple[FieldsOut, MappingOut]:
     """A fields grid (0.15 m) over the map: U_s 0.1 except ``gain_boxes`` (x0, y0, x1, y1, value); U_m in ``busy_boxes``;
     every voxel column over a non-free cell is an occluding wall."""
@@ -467,11 +477,7 @@ def test_a_disc_let_go_rechecks_a_global_target_and_a_better_view_replaces_it():
 
 
 def test_a_target_cut_off_only_by_a_disc_holds_new_targets_in_the_robots_subregion_until_the_disc_goes():
-    free = np.zeros((60, 240), bool)                                 # rooms L, C, R, RR in a row; the robot in C
-    for x0 in (0.5, 3.5, 6.5, 9.5):
-        fill(free, x0, 0.5, x0 + 2.0, 2.5)
-    for x0 in (2.5, 5.5, 8.5):
-        fill(free, x0, 1.2, x0 + 1.0, 1.8)
+    free = four_rooms()                                              # the robot in C
     fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0), (9.5, 0.5, 11.5, 2.5, 1.0), (2.5, 0.5, 9.5, 2.5, 0.02)],
                         [])                                          # gain in L and RR
     held = selection.Target((1.5, 1.5), math.pi, "global", 0)        # in L
@@ -499,11 +505,7 @@ def test_a_target_cut_off_only_by_a_disc_holds_new_targets_in_the_robots_subregi
 
 
 def test_with_global_beats_local_a_far_subregion_wins_only_with_a_better_view_than_the_robots_own():
-    free = np.zeros((60, 240), bool)                                 # rooms L, C, R, RR in a row; the robot in C
-    for x0 in (0.5, 3.5, 6.5, 9.5):
-        fill(free, x0, 0.5, x0 + 2.0, 2.5)
-    for x0 in (2.5, 5.5, 8.5):
-        fill(free, x0, 1.2, x0 + 1.0, 1.8)
+    free = four_rooms()                                              # the robot in C
 
     def select(beat: bool, gain_rr: float) -> SelectionOut:
         fo, mo = fields_for(free, [(3.5, 2.2, 5.5, 2.5, 1.0), (9.5, 0.5, 11.5, 2.5, gain_rr)], [])
