@@ -116,8 +116,8 @@ class SelectionConfig:
     """full: the eq. (10) subregion's best view becomes the target only when its eq. (7) score beats the best
     view of the robot's own subregion; otherwise that local view is the target (below local_threshold). Eq.
     (10) sums a subregion's views without their travel: late in a run, when every view gains little, it sent
-    the robot 5-9 m for views scoring below ones a metre away (full, apartment-03, seed 2, 1000 steps: 6 of its
-    13 global choices, from step 660 on). Measured with full, 1000 steps, seed 0, the 4 apartment scenes, one
+    the robot 3-9 m for views scoring below the best of its own subregion (full, apartment-03, seed 2, 1000
+    steps: 6 of its 13 global choices, from step 660 on). Measured with full, 1000 steps, seed 0, the 4 apartment scenes, one
     machine (benchmarks/results/apartment-1000-selection, Acc cm / C.R. % / PSNR dB, mean of 4, off -> on): 3.20 /
     91.6 / 23.76 -> 3.30 / 90.5 / 23.38, PSNR lower on all 4 (by 0.16-0.60 dB), though the robot reached 28-41
     targets per run (16 and 19 off, on apartment-01 and -03) and chose 34-43 of them locally. How near and how
