@@ -694,8 +694,9 @@ def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, a
     mode = None
     if full:
         in_local = labels == local
-        if in_local.any():
-            r, k = best_in(in_local)
+        local_best = best_in(in_local) if in_local.any() else None
+        if local_best is not None:
+            r, k = local_best
             if score[r, k] > cfg.local_threshold or (local_only and np.isfinite(score[r, k])):
                 mode = "local"
         if mode is None:
@@ -715,8 +716,8 @@ def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, a
                         best_g, best_s = g, s_glob
                 r, k = best_in(labels == best_g)
                 mode = "global"
-                if cfg.global_beats_local and in_local.any():
-                    rl, kl = best_in(in_local)
+                if cfg.global_beats_local and local_best is not None:
+                    rl, kl = local_best
                     if np.isfinite(score[rl, kl]) and score[rl, kl] >= score[r, k]:
                         r, k, mode = rl, kl, "local"
             else:
