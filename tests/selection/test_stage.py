@@ -529,6 +529,31 @@ def test_with_global_beats_local_a_far_subregion_wins_only_with_a_better_view_th
     np.testing.assert_array_equal(on.target_xy_m, off.target_xy_m)
 
 
+def test_with_stand_weight_views_from_where_the_robot_stood_lose_to_the_same_views_elsewhere():
+    free = three_rooms()                                             # the robot in C, facing R
+    fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0), (6.5, 0.5, 8.5, 2.5, 1.0)], [])   # L and R alike
+    stood = np.array([(x, y) for x in (7.0, 7.5, 8.0) for y in (1.0, 1.5, 2.0) for _ in range(5)]
+                     + [(x, 1.5) for x in (5.0, 5.5, 6.0, 6.5) for _ in range(3)], float)   # R, and the way back to C
+
+    def select(weight: float) -> SelectionOut:
+        cfg = selection.SelectionConfig(stand_weight=weight, local_threshold=-1e9,   # always the best view anywhere
+                                        subregions=SubregionConfig(cut_distance=1e6))
+        state = dataclasses.replace(state_on(cfg, free), history_xy_m=stood)
+        rec = StepRecord(frame=blind_frame(4.5, 1.5, 0.0), mapping=mo, fields=fo,
+                         perception=PerceptionOut(np.full((H, W), 0.1, np.float32), 0.0, False))
+        return selection.step(cfg, rec, state, derive_rng(0, "sel"))[1]
+
+    off, on = select(0.0), select(1.0)
+    assert off.target_xy_m[0] > 5.5                                  # R: the robot faces it, less turning
+    assert on.target_xy_m[0] < 3.5                                   # L: R's views kept a fraction of their gain
+    # the gains themselves are the same; only the eq. (7) scores of views at R's nodes fell
+    np.testing.assert_array_equal(on.cand_gain, off.cand_gain)
+    in_r = on.node_xy_m[on.cand_node][:, 0] > 6.5
+    assert np.all(on.cand_score[in_r] < off.cand_score[in_r])
+    np.testing.assert_array_equal(on.cand_score[on.node_xy_m[on.cand_node][:, 0] < 2.5],
+                                  off.cand_score[off.node_xy_m[off.cand_node][:, 0] < 2.5])
+
+
 def test_standing_still_before_something_moving_is_a_wait_not_a_bump():
     free = three_rooms()
     fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0)], [])
