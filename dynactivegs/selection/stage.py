@@ -142,8 +142,9 @@ class SelectionConfig:
     U_s (an observation count and a residual) does not tell a new standpoint from an old one. Measured at 1
     (full, 1000 steps, seed 0, the 4 apartment scenes, one machine, benchmarks/results/apartment-1000-selvariants;
     Acc cm / C.R. % / PSNR dB, mean of 4, 0 -> 1): 3.20 / 91.6 / 23.76 -> 2.93 / 90.9 / 24.36, PSNR better on 3
-    scenes (+0.74 to +1.90 dB), 1.81 dB worse on apartment-02; 33.0 collisions per run against 25.0. Seeds 1-2
-    not yet measured. 0 (default): eq. (7) as it is."""
+    scenes (+0.74 to +1.90 dB), 1.81 dB worse on apartment-02; 33.0 collisions per run against 25.0. Seed 1,
+    apartment-00 and -01: 23.28 and 24.18 dB against 24.39 and 22.94. Over those 6 pairs full beat baseline on
+    all three in 3 against 5. Seeds 1-2 of apartment-02 and -03 not measured. 0 (default): eq. (7) as it is."""
     visit_radius_m: float = 1.0
     """Past robot positions within this distance of a node count as visits of it."""
     visit_norm_steps: float = 10.0
