@@ -694,6 +694,7 @@ def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, a
     score = s_view - (cfg.l_c * cost if cfg.variant in ("gain_cost", "full") else 0.0)   # eq. (7)
     if full and cfg.stand_weight > 0.0 and len(history) and len(nodes):
         stood = cKDTree(history).query_ball_point(xy_nodes[nodes], cfg.visit_radius_m, return_length=True)
+        # I_s -> I_s / (1 + stand_weight * P_visit(n)) in eq. (7)
         score = score - gain + gain / (1.0 + cfg.stand_weight * stood[:, None] / cfg.visit_norm_steps)
     # the view the robot already has is not a new target
     here = (np.hypot(*(xy_nodes[nodes] - robot_xy).T) <= cfg.reach_tol_m)[:, None] & \
