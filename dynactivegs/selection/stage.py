@@ -692,10 +692,12 @@ def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, a
                                                                   cfg.reach_tol_m)
     s_view = gain - (cfg.l_r * risk if full else 0.0)
     score = s_view - (cfg.l_c * cost if cfg.variant in ("gain_cost", "full") else 0.0)   # eq. (7)
-    if full and cfg.stand_weight > 0.0 and len(history) and len(nodes):
-        stood = cKDTree(history).query_ball_point(xy_nodes[nodes], cfg.visit_radius_m, return_length=True)
+    # past robot positions within visit_radius_m of each node: eq. (10)'s visit count, and stand_weight's
+    visits = (cKDTree(history).query_ball_point(xy_nodes[nodes], cfg.visit_radius_m, return_length=True)
+              if full and len(history) and len(nodes) else np.zeros(len(nodes), np.int64))
+    if full and cfg.stand_weight > 0.0:
         # I_s -> I_s / (1 + stand_weight * P_visit(n)) in eq. (7)
-        score = score - gain + gain / (1.0 + cfg.stand_weight * stood[:, None] / cfg.visit_norm_steps)
+        score = score - gain + gain / (1.0 + cfg.stand_weight * visits[:, None] / cfg.visit_norm_steps)
     # the view the robot already has is not a new target
     here = (np.hypot(*(xy_nodes[nodes] - robot_xy).T) <= cfg.reach_tol_m)[:, None] & \
         (np.abs(wrap_angle(yaws[None, :] - robot_yaw)) <= math.radians(cfg.reach_yaw_deg))
@@ -723,13 +725,10 @@ def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, a
         if mode is None:
             others = [int(g) for g in np.unique(labels) if g != local and np.isfinite(score[labels == g]).any()]
             if others:
-                tree = cKDTree(history) if len(history) else None
                 best_g, best_s = -1, -np.inf
                 for g in others:
                     members = labels == g
-                    visits = np.array([len(v) for v in tree.query_ball_point(xy_nodes[nodes[members]], cfg.visit_radius_m)]) \
-                        if tree is not None else np.zeros(int(members.sum()))
-                    p_visit = float(visits.mean()) / cfg.visit_norm_steps
+                    p_visit = float(visits[members].mean()) / cfg.visit_norm_steps
                     best_view = np.max(np.where(np.isfinite(score[members]), s_view[members], -np.inf), axis=1)
                     s_glob = (float(np.where(np.isfinite(best_view), best_view, 0.0).sum())
                               - cfg.l_d * float(length_d[nodes[members]].min()) - cfg.l_v * p_visit)   # eq. (10)
