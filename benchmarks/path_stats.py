@@ -17,9 +17,12 @@ truth and prints one Markdown row:
   camera spent on what the map must not keep).
 
 With ``--metrics`` each row also gets the run's refined C.R. and PSNR (from the metrics file ``dagsbench``
-wrote beside the log), and a last line gives the rank correlation (Spearman) of path m, cells and reached
-targets with PSNR over the runs, each taken relative to its scene's mean (scenes differ in how high PSNR can
-go): which of the path's traits go with a better map.
+wrote beside the log) and its observed surface (**Obs. %**: the share of the coverage probe's ground-truth
+points the camera saw, :class:`dynactivegs.eval.progress.ObservedSurface`; from the metrics file, or
+measured here from the log's frames for runs made before it was recorded), and a last line gives the rank
+correlation (Spearman) of path m, cells, reached targets and Obs. with PSNR over the runs, each taken
+relative to its scene's mean (scenes differ in how high PSNR can go): which of the path's traits go with a
+better map.
 
 Two presets that map the same way (open loop, ``refine_passes.py --set``) but score differently
 closed loop differ here: the map a path allows depends on where it went and what it looked at.
@@ -32,6 +35,7 @@ import collections
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -45,8 +49,10 @@ COLUMNS = ("run", "path m", "cells", "targets local / global", "reached", "given
            "forward / turn / stop", "blocked", "collisions", "people px %")
 
 
-def path_stats(mcap: Path, cell_m: float) -> tuple[str, dict[str, float]]:
-    """(a label, the numbers of the module docstring) of one run log."""
+def path_stats(mcap: Path, cell_m: float, observed: Any = None) -> tuple[str, dict[str, float]]:
+    """(a label, the numbers of the module docstring) of one run log; with ``observed`` (an
+    :class:`~dynactivegs.eval.progress.ObservedSurface`, updated with every logged frame) also its
+    ``observed_pct``."""
     from dynactivegs.records import robot_pose_of
     from dynactivegs.sim.robot import Action
     from replay.source import LogReader
@@ -56,7 +62,10 @@ def path_stats(mcap: Path, cell_m: float) -> tuple[str, dict[str, float]]:
     xy, people, reasons, modes = [], [], collections.Counter(), collections.Counter()
     actions, blocked, collisions = collections.Counter(), 0, 0
     for st in reader.steps():
-        pose = robot_pose_of(st["/frame"])
+        frame = st["/frame"]
+        if observed is not None:
+            observed.update(frame.depth_m, frame.K, frame.T_world_cam)
+        pose = robot_pose_of(frame)
         xy.append((pose.x_m, pose.y_m))
         truth = st["/truth"]
         people.append(float(truth.people_mask.mean()))
@@ -84,24 +93,41 @@ def path_stats(mcap: Path, cell_m: float) -> tuple[str, dict[str, float]]:
         "stop": actions[Action.STOP], "blocked": blocked, "collisions": collisions,
         "people_pct": 100.0 * float(np.mean(people)),
     }
+    if observed is not None:
+        out["observed_pct"] = observed.pct
     return f"{reader.metadata.get('preset', '?')} {cfg.sim.scene} seed {cfg.seed}", out
 
 
-def run_metrics(mcap: Path) -> tuple[float, float]:
-    """(C.R. %, PSNR dB) at the last checkpoint of the metrics file dagsbench wrote beside ``mcap``."""
+def run_metrics(mcap: Path) -> tuple[float, float, float | None, Any]:
+    """(C.R. %, PSNR dB, observed surface % or None when the file predates it, an
+    :class:`~dynactivegs.eval.progress.ObservedSurface` to measure it from the log with when it does) of the
+    last checkpoint of the metrics file dagsbench wrote beside ``mcap``."""
+    from dynactivegs.config import config_from_json
+    from dynactivegs.eval.config import EvalConfig
+    from dynactivegs.eval.geometry import ground_truth_points
+    from dynactivegs.eval.metrics import coverage_probe_of
+    from dynactivegs.eval.progress import ObservedSurface
+
     path = mcap.with_suffix(".json")
     if not path.is_file():
         raise ValueError(f"no metrics file {path} beside the log; pass logs from dagsbench's OUT/runs/PRESET/ "
                          "or leave out --metrics")
     try:
-        last = json.loads(path.read_text())["checkpoints"][-1]
-        return float(last["cr_pct"]), float(last["psnr_db"])
+        done = json.loads(path.read_text())
+        last = done["checkpoints"][-1]
+        cr, psnr, seen = float(last["cr_pct"]), float(last["psnr_db"]), last.get("observed_pct")
+        if seen is not None:
+            return cr, psnr, float(seen), None
+        cfg = config_from_json(json.dumps(done["config"]))
+        ecfg = config_from_json(json.dumps(done["eval_config"]), EvalConfig)
     except (ValueError, KeyError, IndexError, TypeError) as e:
         raise ValueError(f"metrics file {path} is not dagsbench's ({type(e).__name__}: {e}); "
                          "re-run dagsbench --reevaluate for that run") from e
+    probe = coverage_probe_of(ground_truth_points(cfg.sim, ecfg).points_m, ecfg)
+    return cr, psnr, None, ObservedSurface(probe.points_m)
 
 
-TRAITS = ("path_m", "cells", "reached")
+TRAITS = ("path_m", "cells", "reached", "observed_pct")
 
 
 def within_scene_correlations(runs: list[tuple[str, dict[str, float], float]]
@@ -120,6 +146,8 @@ def within_scene_correlations(runs: list[tuple[str, dict[str, float], float]]
     psnr = np.concatenate([np.array([p for _, p in g]) - np.mean([p for _, p in g]) for g in groups])
     out = {}
     for t in TRAITS:
+        if not all(t in s for g in groups for s, _ in g):
+            continue
         x = np.concatenate([np.array([s[t] for s, _ in g], float) - np.mean([s[t] for s, _ in g]) for g in groups])
         rho, p = spearmanr(x, psnr)
         out[t] = (float(rho), float(p))
@@ -143,18 +171,19 @@ def main(argv: list[str] | None = None) -> int:
         sys.exit(f"error: bad --cell {args.cell}: must be > 0 m")
     from dynactivegs.errors import DagsError
 
-    columns = COLUMNS + (("C.R. %", "PSNR dB") if args.metrics else ())
+    columns = COLUMNS + (("C.R. %", "PSNR dB", "Obs. %") if args.metrics else ())
     print("| " + " | ".join(columns) + " |\n" + "|---" * len(columns) + "|", flush=True)
     runs = []
     for path in args.mcap:
         try:
-            label, stats = path_stats(path, args.cell)
             metrics = run_metrics(path) if args.metrics else None
+            label, stats = path_stats(path, args.cell, metrics[3] if metrics else None)
         except (DagsError, ValueError) as e:
             sys.exit(f"error: {e}")
         line = row(label, stats)
         if metrics is not None:
-            line += f" {metrics[0]:.1f} | {metrics[1]:.2f} |"
+            stats.setdefault("observed_pct", metrics[2])
+            line += f" {metrics[0]:.1f} | {metrics[1]:.2f} | {stats['observed_pct']:.1f} |"
             runs.append((label.split(" ")[1], stats, metrics[1]))
         print(line, flush=True)
     if args.metrics:

@@ -149,25 +149,32 @@ def check_finished(spec: RunSpec) -> bool:
 
 # ---------------------------------------------------------------------------------------- one run
 class _ProgressSink:
-    """Snapshots the map at the checkpoint step counts and measures coverage every ``every`` steps."""
+    """Snapshots the map at the checkpoint step counts, measures coverage every ``every`` steps and the
+    observed surface (of the coverage probe's points) at every step."""
 
     def __init__(self, checkpoints: tuple[int, ...], probe: Any, every: int, last: int) -> None:
+        from dynactivegs.eval.progress import ObservedSurface
+
         self.checkpoints = set(checkpoints)
         self.probe = probe
         self.every = every
         self.last = last
         self.snapshots: dict[int, Any] = {}
         self.coverage: list[tuple[int, float]] = []
+        self.observed = ObservedSurface(probe.points_m)
+        self.observed_at: dict[int, float] = {}       # checkpoint step count -> observed surface %
         self.last_stamp_ns = 0
 
     def on_step(self, rec: Any, truth: Any, states: list[object], metrics: dict[str, float]) -> None:
         done = rec.frame.step + 1                     # steps taken so far
         self.last_stamp_ns = rec.frame.stamp_ns
+        self.observed.update(rec.frame.depth_m, rec.frame.K, rec.frame.T_world_cam)
         g = states[1].gaussians
         if done in self.checkpoints:
             from dynactivegs.splat.gaussians import Gaussians
 
             self.snapshots[done] = Gaussians(*(t.detach().clone() for t in g.tensors()))
+            self.observed_at[done] = self.observed.pct
         if done % self.every == 0 or done == self.last or done == 1:
             self.coverage.append((done, self.probe.of_gaussians(g)))
 
@@ -196,6 +203,14 @@ def evaluate_row(evaluator: Any, fraction: float, step: int, g: Any, trajectory_
     online = {"n_gaussians": len(g), **{k: getattr(m, k) for k in ONLINE_KEYS}}
     return {"fraction": fraction, "n_gaussians": len(refined), **extra, "refine_iters": iters,
             **dataclasses.asdict(r), "online": online}
+
+
+def observed_note(evaluator: Any) -> str:
+    """What a checkpoint row's ``observed_pct`` is (the metrics file says it beside the numbers)."""
+    from dynactivegs.eval.progress import OBSERVED_TOL_M
+
+    return (f"observed_pct: % of the {len(evaluator.coverage_probe().points_m)} coverage probe points the camera "
+            f"saw by the step (depth return within {OBSERVED_TOL_M * 100:g} cm of the point)")
 
 
 def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
@@ -251,7 +266,7 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
         writer.close({"interrupted": "false", "seconds": f"{t_run:.3f}", "refine_seconds": f"{t_ref:.3f}"})
     t2 = time.perf_counter()
     rows = [evaluate_row(evaluator, frac, step, progress.snapshots[step], res.trajectory_xy_m,
-                         refined if step == spec.steps else None, iters)
+                         refined if step == spec.steps else None, iters, observed_pct=progress.observed_at[step])
             for frac, step in zip(CHECKPOINT_FRACTIONS, checkpoints)]
     result = {
         "version": RESULT_VERSION, "preset": spec.preset, "scene": spec.scene, "seed": spec.seed,
@@ -260,6 +275,7 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
         "checkpoints": rows, "coverage": [[s, c] for s, c in progress.coverage],
         "coverage_note": f"% of {len(evaluator.coverage_probe().points_m)} ground-truth points within "
                          f"{ecfg.cr_threshold_cm:g} cm of an opaque Gaussian centre",
+        "observed_note": observed_note(evaluator),
         "seconds_per_step": res.seconds_per_step, "seconds_run": t_run, "seconds_refine": t_ref,
         "seconds_eval": time.perf_counter() - t2,
         "seconds_setup": t_setup, "collisions": res.collisions,
@@ -271,11 +287,13 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
     return result
 
 
-def _logged_maps(mcap_path: Path, steps: list[int]) -> tuple[dict[int, tuple[int, Any]], Any, Any]:
+def _logged_maps(mcap_path: Path, steps: list[int], observed: Any
+                 ) -> tuple[dict[int, tuple[int, Any]], Any, Any, dict[int, float]]:
     """From a run's log: for each wanted step index, (the logged step used, its map snapshot), the
-    trajectory (T, 2) from ``/truth`` and the refined map (None if the log has none). The snapshot at the
-    step itself is used when logged, else the nearest later one (logs written before checkpoint snapshots
-    were added have them every 50 steps)."""
+    trajectory (T, 2) from ``/truth``, the refined map (None if the log has none) and the observed surface
+    % after each wanted step (``observed``, an :class:`~dynactivegs.eval.progress.ObservedSurface`, is
+    updated with every logged frame). The snapshot at the step itself is used when logged, else the nearest
+    later one (logs written before checkpoint snapshots were added have them every 50 steps)."""
     import numpy as np
 
     from replay.source import LogReader
@@ -284,8 +302,14 @@ def _logged_maps(mcap_path: Path, steps: list[int]) -> tuple[dict[int, tuple[int
     reader = LogReader(mcap_path)
     logged: dict[int, Any] = {}
     traj = []
+    seen_at: dict[int, float] = {}
+    wanted = set(steps)
     for st in reader.steps():
         traj.append((st["/truth"].robot.x_m, st["/truth"].robot.y_m))
+        f = st["/frame"]
+        observed.update(f.depth_m, f.K, f.T_world_cam)
+        if st.step in wanted:
+            seen_at[st.step] = observed.pct
         if MAP_TOPIC in st:
             logged[st.step] = st
     maps: dict[int, tuple[int, Any]] = {}
@@ -296,7 +320,7 @@ def _logged_maps(mcap_path: Path, steps: list[int]) -> tuple[dict[int, tuple[int
                             f"{reader.end.last_step if reader.end else '?'}); re-run it instead")
         k = min(later)
         maps[want] = (k, logged[k][MAP_TOPIC])
-    return maps, np.asarray(traj, np.float64).reshape(-1, 2), reader.refined_map()
+    return maps, np.asarray(traj, np.float64).reshape(-1, 2), reader.refined_map(), seen_at
 
 
 def reevaluate_one(metrics_path: Path, eval_overrides: tuple[str, ...] = ()) -> dict[str, Any]:
@@ -319,15 +343,20 @@ def reevaluate_one(metrics_path: Path, eval_overrides: tuple[str, ...] = ()) -> 
     t0 = time.perf_counter()
     evaluator = SceneEvaluator(cfg.sim, ecfg)
     old_rows = done["checkpoints"]
-    maps, traj, refined = _logged_maps(mcap_path, [r["step"] - 1 for r in old_rows])
+    from dynactivegs.eval.progress import ObservedSurface
+
+    maps, traj, refined, seen_at = _logged_maps(mcap_path, [r["step"] - 1 for r in old_rows],
+                                                ObservedSurface(evaluator.coverage_probe().points_m))
     last = max(r["step"] for r in old_rows)
     rows = []
     for r in old_rows:
         used, g = maps[r["step"] - 1]
         final = refined if r["step"] == last else None
         rows.append(evaluate_row(evaluator, r["fraction"], r["step"], g, traj, final,
-                                 r.get("refine_iters", 0) if final is not None else 0, map_step=used + 1))
-    done.update(checkpoints=rows, eval_overrides=list(eval_overrides), eval_config=json.loads(to_json(ecfg)),
+                                 r.get("refine_iters", 0) if final is not None else 0, map_step=used + 1,
+                                 observed_pct=seen_at[r["step"] - 1]))
+    done.update(checkpoints=rows, observed_note=observed_note(evaluator), eval_overrides=list(eval_overrides),
+                eval_config=json.loads(to_json(ecfg)),
                 seconds_eval=time.perf_counter() - t0, reevaluated=time.strftime("%Y-%m-%d"))
     tmp = metrics_path.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(done, indent=1))

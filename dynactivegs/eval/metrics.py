@@ -61,6 +61,12 @@ class Metrics:
                 f"| recon: {self.recon_method}, {self.n_recon_points} pts")
 
 
+def coverage_probe_of(gt_points_m: np.ndarray, cfg: EvalConfig) -> CoverageProbe:
+    """The probe of ``cfg.coverage_points`` of the ground-truth points (N, 3) at the C.R. threshold: coverage and
+    the observed surface are measured on it."""
+    return CoverageProbe.from_ground_truth(gt_points_m, cfg.coverage_points, cfg.cr_threshold_cm, cfg.gt_seed)
+
+
 class SceneEvaluator:
     """Metrics of Gaussian maps of one scene. Builds (or loads) the ground truth on construction."""
 
@@ -91,8 +97,7 @@ class SceneEvaluator:
 
     def coverage_probe(self) -> CoverageProbe:
         """A probe of ``cfg.coverage_points`` ground-truth points at the C.R. threshold."""
-        return CoverageProbe.from_ground_truth(self.gt.points_m, self.cfg.coverage_points, self.cfg.cr_threshold_cm,
-                                               self.cfg.gt_seed)
+        return coverage_probe_of(self.gt.points_m, self.cfg)
 
     def recon_points(self, gaussians: Gaussians, method: str | None = None, backend: Backend = "auto") -> ReconPoints:
         """Reconstruction points of the map by ``method`` (default ``cfg.recon_method``)."""

@@ -6,6 +6,13 @@ progress bar, a viewer plot): the percentage of a fixed subsample of the ground-
 points that have an opaque Gaussian centre within the C.R. threshold. It tracks C.R. from
 below-or-near (Gaussian centres are sparser than rendered surfaces) and is not a
 replacement for it.
+
+Observed surface (:class:`ObservedSurface`) is a trait of the path, not of the map: the percentage of
+the same probe points that the camera has seen so far, by its own depth (a point is seen in a frame when
+it projects into the image, in front of the camera, onto a pixel whose depth return lies within
+``OBSERVED_TOL_M`` of the point's depth; a person or an object in front hides it). A map can only be as
+complete as what its path saw; PSNR on held-out views goes with it (benchmarks/results/
+apartment-1000-observed).
 """
 
 from __future__ import annotations
@@ -66,3 +73,36 @@ class CoverageProbe:
             keep = gaussians.opacities > opacity_min
             pts = gaussians.means[keep].detach().to("cpu", torch.float64).numpy()
         return self(pts)
+
+
+OBSERVED_TOL_M = 0.03
+"""A probe point is seen in a frame when the depth return at its pixel is within this of its own z-depth."""
+
+
+class ObservedSurface:
+    """Which of a fixed set of surface points (M, 3) the camera has seen so far (module docstring)."""
+
+    def __init__(self, points_m: np.ndarray, tol_m: float = OBSERVED_TOL_M) -> None:
+        assert points_m.ndim == 2 and points_m.shape[1] == 3 and tol_m > 0
+        self.points_m = np.asarray(points_m, dtype=np.float64)
+        self.tol_m = float(tol_m)
+        self.seen = np.zeros(len(self.points_m), dtype=np.bool_)
+
+    def update(self, depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray) -> None:
+        """Mark the points seen in one frame: z-depth image (H, W) in m (0: no return), intrinsics (3, 3) with
+        pixel centres at +0.5, camera-to-world (4, 4) in OpenCV axes."""
+        h, w = depth_m.shape
+        pc = (self.points_m - T_world_cam[:3, 3]) @ T_world_cam[:3, :3]      # world -> camera
+        z = pc[:, 2]
+        front = z > 1e-6
+        zs = np.where(front, z, 1.0)
+        u = np.floor(K[0, 0] * pc[:, 0] / zs + K[0, 2])
+        v = np.floor(K[1, 1] * pc[:, 1] / zs + K[1, 2])
+        idx = np.flatnonzero(front & (u >= 0) & (u < w) & (v >= 0) & (v < h))
+        d = depth_m[v[idx].astype(np.int64), u[idx].astype(np.int64)]
+        self.seen[idx[(d > 0) & (np.abs(d - z[idx]) <= self.tol_m)]] = True
+
+    @property
+    def pct(self) -> float:
+        """Percentage of the points seen so far (0 for no points)."""
+        return float(self.seen.mean() * 100.0) if len(self.seen) else 0.0

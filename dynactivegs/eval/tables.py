@@ -11,7 +11,9 @@ Pure functions of the runs' metrics dicts as ``dagsbench`` writes them (one per 
 Aggregation: a cell is the mean +- sample standard deviation over seeds (std shown only
 with two or more seeds). A "Mean" column averages each seed's values over the scenes
 first, then gives mean +- std over seeds. "Best" compares the means of a column (lowest
-for Acc, Comp, depth L1, LPIPS; highest for C.R., PSNR, SSIM); ties are all best.
+for Acc, Comp, depth L1, LPIPS; highest for C.R., PSNR, SSIM, Obs.); ties are all best. Obs. (%) is the
+surface the path let the camera see (:class:`dynactivegs.eval.progress.ObservedSurface`), what the map had
+to be built from; runs measured before it existed show "n/a" until ``dagsbench --reevaluate``.
 
 The ablation tables follow the paper's Tables 3-5. Their rows are chosen by what a run's
 config switches on (weighted mapping, selection variant, planner variant), not by preset
@@ -46,6 +48,7 @@ METRICS: tuple[MetricSpec, ...] = (
     MetricSpec("ssim", "SSIM", True, 3),
     MetricSpec("lpips", "LPIPS", False, 3),
     MetricSpec("depth_l1_cm", "Depth L1 (cm)", False, 2),
+    MetricSpec("observed_pct", "Obs. (%)", True, 1),      # of the path, not the map: progress.ObservedSurface
 )
 METRIC_BY_KEY = {m.key: m for m in METRICS}
 FRACTIONS = (0.25, 0.5, 0.75, 1.0)
@@ -148,7 +151,7 @@ PRESET_ORDER = ("frontier", "baseline", "weighted", "motion_view", "full")
 
 
 def main_table(runs: Sequence[dict[str, Any]], metrics: Sequence[str] = ("acc_cm", "comp_cm", "cr_pct", "psnr_db",
-               "ssim", "lpips", "depth_l1_cm"), fraction: float = 1.0) -> Table:
+               "ssim", "lpips", "depth_l1_cm", "observed_pct"), fraction: float = 1.0) -> Table:
     """Rows = method x metric, columns = scenes + Mean; the best method per (metric, column) in bold."""
     methods = _ordered((r["preset"] for r in runs), PRESET_ORDER)
     scenes = _ordered(r["scene"] for r in runs)
@@ -205,7 +208,7 @@ PLANNER_ROWS: tuple[tuple[str, tuple[bool, str, str]], ...] = (
     ("dyn_edge", (True, "full", "dyn_edge")),
     ("dyn_edge_temporal (full)", (True, "full", "dyn_edge_temporal")),
 )
-ABLATION_METRICS = ("acc_cm", "comp_cm", "cr_pct", "psnr_db", "ssim", "depth_l1_cm")
+ABLATION_METRICS = ("acc_cm", "comp_cm", "cr_pct", "psnr_db", "ssim", "depth_l1_cm", "observed_pct")
 PLANNER_METRICS = ("cr_pct", "acc_cm", "psnr_db")
 
 

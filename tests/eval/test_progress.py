@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from dynactivegs.eval.progress import CoverageProbe, checkpoint_steps
+from dynactivegs.eval.progress import CoverageProbe, ObservedSurface, checkpoint_steps
+from dynactivegs.sim.robot import camera_pose
 from dynactivegs.splat import Gaussians
 
 
@@ -38,3 +39,40 @@ def test_coverage_is_the_share_of_ground_truth_near_the_reconstruction():
                               torch.full((n, 3), 0.5, dtype=torch.float64))
     assert probe.of_gaussians(g) == pytest.approx(probe(gt[gt[:, 0] < 2.0]))
     assert probe.of_gaussians(g, opacity_min=0.95) == 0.0
+
+
+def _wall_points() -> np.ndarray:
+    """A 1 cm grid on the wall x = 2 m, y in [-4, 4), z in [0, 2) (camera at the origin, height 1 m)."""
+    y, z = np.meshgrid(np.arange(-4.0, 4.0, 0.01) + 0.005, np.arange(0.0, 2.0, 0.01) + 0.005, indexing="ij")
+    return np.stack([np.full(y.size, 2.0), y.ravel(), z.ravel()], axis=1)
+
+
+def test_observed_surface_is_what_the_frustum_saw_by_depth():
+    # a 64 x 48 camera with 90 deg horizontal field of view at (0, 0, 1) m looking along +x at the wall x = 2 m
+    K = np.array([[32.0, 0.0, 32.0], [0.0, 32.0, 24.0], [0.0, 0.0, 1.0]])
+    T = camera_pose(0.0, 0.0, 0.0, 1.0)
+    pts = _wall_points()
+    wall = np.full((48, 64), 2.0, np.float32)              # the wall is at z-depth 2 m at every pixel
+    obs = ObservedSurface(pts)
+    obs.update(wall, K, T)
+    # the frustum meets the wall in |y| < 2 m (half of 8 m) and |z - 1| < 1.5 m (all of its 2 m): 50 %
+    assert obs.pct == pytest.approx(50.0, abs=0.3)
+    assert np.all(np.abs(pts[obs.seen, 1]) <= 2.0 + 0.07)
+    # a person 1 m in front of the camera over the image's left half hides the wall there
+    hidden = ObservedSurface(pts)
+    person = wall.copy()
+    person[:, :32] = 1.0
+    hidden.update(person, K, T)
+    assert hidden.pct == pytest.approx(25.0, abs=0.3) and np.all(pts[hidden.seen, 1] < 0.07)   # x right = -y
+    # no depth return: nothing seen; a depth off by more than the tolerance: nothing seen
+    for depth in (np.zeros_like(wall), wall + 0.05):
+        none = ObservedSurface(pts)
+        none.update(depth, K, T)
+        assert none.pct == 0.0
+    # the wall behind the camera is not seen, though its points project into the image through the centre
+    behind = ObservedSurface(pts * [-1.0, 1.0, 1.0])
+    behind.update(wall, K, T)
+    assert behind.pct == 0.0
+    # seen points stay seen: turning to the person's side and back adds the left half after all
+    hidden.update(wall, K, T)
+    assert hidden.pct == pytest.approx(obs.pct) and np.array_equal(hidden.seen, obs.seen)

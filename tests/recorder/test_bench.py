@@ -53,6 +53,9 @@ def test_runs_write_metrics_at_every_checkpoint_and_a_log(finished):
         assert set(r["checkpoints"][-1]["online"]) >= {"acc_cm", "cr_pct", "psnr_db", "n_gaussians"}
         assert all("online" not in c for c in r["checkpoints"][:-1]) and r["seconds_refine"] > 0
         assert r["coverage"][0][0] == 1 and r["coverage"][-1][0] == 6
+        # the camera has seen some of the probe points after its first frames, and never unsees one
+        seen = [c["observed_pct"] for c in r["checkpoints"]]
+        assert 0.0 < seen[0] and seen == sorted(seen) and seen[-1] <= 100.0 and "observed_pct" in r["observed_note"]
         assert r["config"]["sim"]["camera"]["width_px"] == 64
         assert r["config"]["mapping"]["weighted"] is (p == "full")
         log = out / "runs" / p / "tiny-00-seed0.mcap"
@@ -120,6 +123,8 @@ def test_reevaluate_measures_finished_runs_again_from_their_logs(finished, tmp_p
         assert (a["acc_cm"], a["comp_cm"], a["cr_pct"]) == (b["acc_cm"], b["comp_cm"], b["cr_pct"])
         assert a["refine_iters"] == b["refine_iters"] and a.get("online", {}).get("cr_pct") == b.get("online", {}).get("cr_pct")
         assert a["n_views"] == 3 and b["n_views"] == 4
+        # the frames of the log give the observed surface the run measured online
+        assert a["observed_pct"] == b["observed_pct"]
     (copy / "runs" / "full" / "tiny-00-seed0.mcap").unlink()
     assert bench.main(tiny_args(copy, cache, "full", "--reevaluate")) == 2
     err = capsys.readouterr().err
@@ -297,7 +302,7 @@ def test_occupancy_errors_counts_a_false_obstacle_and_a_cleared_wall():
     assert e["known_free_pct"] == pytest.approx(100.0 * (free.sum() - 2) / free.sum())
 
 
-def test_path_stats_counts_the_logged_path(finished, capsys):
+def test_path_stats_counts_the_logged_path(finished, capsys, tmp_path):
     """benchmarks/path_stats.py on the sweep's two runs: one action per step, the collisions dagsbench counted,
     the robot's distance driven and cells from its logged poses; a missing log is one line."""
     from dynactivegs.records import robot_pose_of
@@ -325,10 +330,20 @@ def test_path_stats_counts_the_logged_path(finished, capsys):
     logs = [str(out / "runs" / p / "tiny-00-seed0.mcap") for p in ("baseline", "full")]
     assert mod.main(["--metrics", *logs]) == 0
     printed = capsys.readouterr().out.splitlines()
-    assert printed[0].endswith("| C.R. % | PSNR dB |")
+    assert printed[0].endswith("| C.R. % | PSNR dB | Obs. % |")
     last = json.loads((out / "runs" / "full" / "tiny-00-seed0.json").read_text())["checkpoints"][-1]
-    assert printed[3].endswith(f"| {last['cr_pct']:.1f} | {last['psnr_db']:.2f} |")
+    assert printed[3].endswith(f"| {last['cr_pct']:.1f} | {last['psnr_db']:.2f} | {last['observed_pct']:.1f} |")
     assert printed[-1].endswith("needs 3 runs or more in scenes with 2 or more")     # two runs of one scene
+    # a metrics file from before the observed surface was recorded: measured from the log's frames, the same
+    old = tmp_path / "old"
+    shutil.copytree(out / "runs" / "full", old)
+    done = json.loads((old / "tiny-00-seed0.json").read_text())
+    for c in done["checkpoints"]:
+        del c["observed_pct"]
+    (old / "tiny-00-seed0.json").write_text(json.dumps(done))
+    cr, psnr, seen, observed = mod.run_metrics(old / "tiny-00-seed0.mcap")
+    assert (cr, psnr, seen) == (last["cr_pct"], last["psnr_db"], None)
+    assert mod.path_stats(old / "tiny-00-seed0.mcap", 0.5, observed)[1]["observed_pct"] == last["observed_pct"]
 
 
 def test_path_stats_correlates_path_traits_with_psnr_within_each_scene(tmp_path):
