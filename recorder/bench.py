@@ -205,11 +205,11 @@ def evaluate_row(evaluator: Any, fraction: float, step: int, g: Any, trajectory_
             **dataclasses.asdict(r), "online": online}
 
 
-def observed_note(evaluator: Any) -> str:
+def observed_note(n_points: int) -> str:
     """What a checkpoint row's ``observed_pct`` is (the metrics file says it beside the numbers)."""
     from dynactivegs.eval.progress import OBSERVED_TOL_M
 
-    return (f"observed_pct: % of the {len(evaluator.coverage_probe().points_m)} coverage probe points the camera "
+    return (f"observed_pct: % of the {n_points} coverage probe points the camera "
             f"saw by the step (depth return within {OBSERVED_TOL_M * 100:g} cm of the point)")
 
 
@@ -230,7 +230,8 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
     evaluator = SceneEvaluator(cfg.sim, ecfg)
     t_setup = time.perf_counter() - t0
     checkpoints = checkpoint_steps(spec.steps)
-    progress = _ProgressSink(checkpoints, evaluator.coverage_probe(),
+    probe = evaluator.coverage_probe()
+    progress = _ProgressSink(checkpoints, probe,
                              max(1, spec.steps // COVERAGE_POINTS_PER_RUN), spec.steps)
     sinks: list[Any] = [progress]
     writer = None
@@ -273,9 +274,9 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
         "steps": spec.steps, "overrides": list(spec.overrides), "eval_overrides": list(spec.eval_overrides),
         "config": json.loads(to_json(cfg)), "eval_config": json.loads(to_json(ecfg)),
         "checkpoints": rows, "coverage": [[s, c] for s, c in progress.coverage],
-        "coverage_note": f"% of {len(evaluator.coverage_probe().points_m)} ground-truth points within "
+        "coverage_note": f"% of {len(probe.points_m)} ground-truth points within "
                          f"{ecfg.cr_threshold_cm:g} cm of an opaque Gaussian centre",
-        "observed_note": observed_note(evaluator),
+        "observed_note": observed_note(len(probe.points_m)),
         "seconds_per_step": res.seconds_per_step, "seconds_run": t_run, "seconds_refine": t_ref,
         "seconds_eval": time.perf_counter() - t2,
         "seconds_setup": t_setup, "collisions": res.collisions,
@@ -345,8 +346,9 @@ def reevaluate_one(metrics_path: Path, eval_overrides: tuple[str, ...] = ()) -> 
     old_rows = done["checkpoints"]
     from dynactivegs.eval.progress import ObservedSurface
 
+    probe_points = evaluator.coverage_probe().points_m
     maps, traj, refined, seen_at = _logged_maps(mcap_path, [r["step"] - 1 for r in old_rows],
-                                                ObservedSurface(evaluator.coverage_probe().points_m))
+                                                ObservedSurface(probe_points))
     last = max(r["step"] for r in old_rows)
     rows = []
     for r in old_rows:
@@ -355,7 +357,7 @@ def reevaluate_one(metrics_path: Path, eval_overrides: tuple[str, ...] = ()) -> 
         rows.append(evaluate_row(evaluator, r["fraction"], r["step"], g, traj, final,
                                  r.get("refine_iters", 0) if final is not None else 0, map_step=used + 1,
                                  observed_pct=seen_at[r["step"] - 1]))
-    done.update(checkpoints=rows, observed_note=observed_note(evaluator), eval_overrides=list(eval_overrides),
+    done.update(checkpoints=rows, observed_note=observed_note(len(probe_points)), eval_overrides=list(eval_overrides),
                 eval_config=json.loads(to_json(ecfg)),
                 seconds_eval=time.perf_counter() - t0, reevaluated=time.strftime("%Y-%m-%d"))
     tmp = metrics_path.with_suffix(".json.tmp")
