@@ -17,7 +17,7 @@ Per step:
      cost ``len + motion_weight * mean U_m`` from the robot; the best view in the robot's
      subregion if its score exceeds ``local_threshold``, else the best view in the subregion
      with the best eq. (10) ``S_global(R_k) = sum_n max_yaw (I_s - l_r R_m) - l_d d(R_l, R_k)
-     - l_v P_visit(R_k)``.
+     - l_v P_visit(R_k)``.  With ``subregion_choice`` off, the best eq. (7) view anywhere.
    - ``gain_cost``: ``S = I_s - l_c C`` with C the path length; ``static_gain``: ``S = I_s``;
      both take the best view anywhere (no motion term anywhere, the paper's Table 4).
    - ``random``: a random reachable node and heading (from ``rng``).
@@ -129,6 +129,12 @@ class SelectionConfig:
     of 4, off -> on): 3.20 / 91.6 / 23.76 -> 3.30 / 90.5 / 23.38, PSNR lower on all 4 (by 0.16-0.60 dB), though
     the robot reached 28-41 targets per run (16 and 19 off, on apartment-01 and -03) and chose 34-43 of them
     locally. How near and how many the targets are does not make full's PSNR: off."""
+    subregion_choice: bool = True
+    """full: choose the target by the subregion rule (the robot's own subregion while its best view scores above
+    local_threshold, else the eq. (10) subregion; cut_hold_local holds it local). False: the best eq. (7) view
+    anywhere, as gain_cost and static_gain take theirs, with full's motion terms (R_m, the eq. (11) travel cost,
+    stand_weight) kept: with l_r, motion_weight and stand_weight at 0 it chooses what gain_cost chooses. It
+    separates the cost of the subregion rule from that of the motion terms."""
     l_d: float = 2.0
     """lambda_d of eq. (10): weight of the path length from the robot to a subregion (per metre)."""
     l_v: float = 5.0
@@ -718,7 +724,7 @@ def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, a
         return flat // ny, flat % ny
 
     mode = None
-    if full:
+    if full and cfg.subregion_choice:
         in_local = labels == local
         local_best = best_in(in_local) if in_local.any() else None
         if local_best is not None:

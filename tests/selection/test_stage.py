@@ -529,6 +529,37 @@ def test_with_global_beats_local_a_far_subregion_wins_only_with_a_better_view_th
     np.testing.assert_array_equal(on.target_xy_m, off.target_xy_m)
 
 
+def test_without_the_subregion_rule_full_takes_the_best_view_anywhere_and_keeps_its_motion_terms():
+    free = four_rooms()                                              # the robot in C
+    fo, mo = fields_for(free, [(3.5, 2.2, 5.5, 2.5, 1.0), (9.5, 0.5, 11.5, 2.5, 0.1)], [])
+    cuts = SubregionConfig(cut_distance=3.0)
+    rule = select_once(selection.SelectionConfig(local_threshold=1e9, subregions=cuts), free, fo, mo, (4.5, 1.5))
+    anywhere = select_once(selection.SelectionConfig(local_threshold=1e9, subregions=cuts, subregion_choice=False),
+                           free, fo, mo, (4.5, 1.5))
+    # the rule leaves C by eq. (10) for a view worse than C's best; without it the best eq. (7) view is the target
+    assert rule.mode == "global" and rule.cand_score[rule.cand_node == rule.target_node].max() < rule.cand_score.max()
+    best = int(np.argmax(anywhere.cand_score))
+    assert anywhere.target_node == anywhere.cand_node[best] and anywhere.target_xy_m[0] < 6.0
+    np.testing.assert_array_equal(anywhere.cand_score, rule.cand_score)     # the same eq. (7) scores either way
+
+    # a busy corridor to the richer room: without the rule full still prices it (R_m, eq. 11), and with its
+    # motion terms at 0 it chooses what gain_cost chooses
+    free = three_rooms()
+    fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0), (6.5, 0.5, 8.5, 2.5, 1.05)], [(5.5, 1.0, 6.5, 2.0, 3.0)])
+
+    def pick(variant: str, **kw) -> SelectionOut:
+        cfg = selection.SelectionConfig(variant=variant, subregion_choice=False, turn_cost_m=0.0, l_c=1.0, **kw)
+        return select_once(cfg, free, fo, mo, (4.5, 1.5))
+
+    gain_cost = pick("gain_cost")
+    assert gain_cost.target_xy_m[0] > 5.5                                 # the richer room, behind the corridor
+    assert pick("full", l_r=1.0).target_xy_m[0] < 3.5                     # the calm room
+    no_motion = pick("full", l_r=0.0, motion_weight=0.0)
+    np.testing.assert_array_equal(no_motion.target_xy_m, gain_cost.target_xy_m)
+    assert no_motion.target_yaw_rad == gain_cost.target_yaw_rad
+    np.testing.assert_allclose(no_motion.cand_score, gain_cost.cand_score)
+
+
 def test_with_stand_weight_views_from_where_the_robot_stood_lose_to_the_same_views_elsewhere():
     free = three_rooms()                                             # the robot in C, facing R
     fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0), (6.5, 0.5, 8.5, 2.5, 1.0)], [])   # L and R alike
