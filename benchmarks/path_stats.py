@@ -18,9 +18,10 @@ truth and prints one Markdown row:
 
 With ``--metrics`` each row also gets the run's refined C.R. and PSNR (from the metrics file ``dagsbench``
 wrote beside the log) and its observed surface (**Obs. %**: the share of the coverage probe's ground-truth
-points the camera saw, :class:`dynactivegs.eval.progress.ObservedSurface`; from the metrics file, or
-measured here from the log's frames for runs made before it was recorded), and a last line gives the rank
-correlation (Spearman) of path m, cells, reached targets and Obs. with PSNR over the runs, each taken
+points the camera saw, :class:`dynactivegs.eval.progress.ObservedSurface`; **Obs. views %**: the share of
+the held-out views' pixels showing surface it saw; from the metrics file, or measured here from the log's
+frames for runs made before they were recorded), and a last line gives the rank correlation (Spearman) of
+path m, cells, reached targets, Obs. and Obs. views with PSNR over the runs, each taken
 relative to its scene's mean (scenes differ in how high PSNR can go): which of the path's traits go with a
 better map.
 
@@ -49,17 +50,19 @@ COLUMNS = ("run", "path m", "cells", "targets local / global", "reached", "given
            "forward / turn / stop", "blocked", "collisions", "people px %")
 
 
-def path_stats(mcap: Path, cell_m: float, observed: Any = None) -> tuple[str, dict[str, float]]:
+def path_stats(mcap: Path, cell_m: float, observed: Any = None, evaluator: Any = None
+               ) -> tuple[str, dict[str, float]]:
     """(a label, the numbers of the module docstring) of one run log; with ``observed`` (an
     :class:`~dynactivegs.eval.progress.ObservedSurface`, updated with every logged frame) also its
-    ``observed_pct``."""
+    ``observed_pct``, and with ``evaluator`` too (the scene's
+    :class:`~dynactivegs.eval.metrics.SceneEvaluator`) its ``observed_view_pct``."""
     from dynactivegs.records import robot_pose_of
     from dynactivegs.sim.robot import Action
     from replay.source import LogReader
 
     reader = LogReader(mcap)
     cfg = logged_config(reader, mcap)
-    xy, people, reasons, modes = [], [], collections.Counter(), collections.Counter()
+    xy, truth_xy, people, reasons, modes = [], [], [], collections.Counter(), collections.Counter()
     actions, blocked, collisions = collections.Counter(), 0, 0
     for st in reader.steps():
         frame = st["/frame"]
@@ -68,6 +71,7 @@ def path_stats(mcap: Path, cell_m: float, observed: Any = None) -> tuple[str, di
         pose = robot_pose_of(frame)
         xy.append((pose.x_m, pose.y_m))
         truth = st["/truth"]
+        truth_xy.append((truth.robot.x_m, truth.robot.y_m))
         people.append(float(truth.people_mask.mean()))
         collisions += bool(truth.collided)
         sel, plan = st.get("/selection"), st.get("/planning")
@@ -95,18 +99,19 @@ def path_stats(mcap: Path, cell_m: float, observed: Any = None) -> tuple[str, di
     }
     if observed is not None:
         out["observed_pct"] = observed.pct
+        if evaluator is not None:
+            out["observed_view_pct"] = evaluator.observed_view_pct(observed, np.asarray(truth_xy))
     return f"{reader.metadata.get('preset', '?')} {cfg.sim.scene} seed {cfg.seed}", out
 
 
-def run_metrics(mcap: Path) -> tuple[float, float, float | None, Any]:
-    """(C.R. %, PSNR dB, observed surface % or None when the file predates it, an
-    :class:`~dynactivegs.eval.progress.ObservedSurface` to measure it from the log with when it does) of the
-    last checkpoint of the metrics file dagsbench wrote beside ``mcap``."""
+def run_metrics(mcap: Path) -> tuple[float, float, float | None, float | None, Any, Any]:
+    """(C.R. %, PSNR dB, observed surface %, its share of the held-out views %, and when the file predates
+    either (they are None then) an :class:`~dynactivegs.eval.progress.ObservedSurface` and the scene's
+    :class:`~dynactivegs.eval.metrics.SceneEvaluator` to measure them from the log with) of the last
+    checkpoint of the metrics file dagsbench wrote beside ``mcap``."""
     from dynactivegs.config import config_from_json
     from dynactivegs.eval.config import EvalConfig
-    from dynactivegs.eval.geometry import ground_truth_points
-    from dynactivegs.eval.metrics import coverage_probe_of
-    from dynactivegs.eval.progress import ObservedSurface
+    from dynactivegs.eval.metrics import SceneEvaluator
 
     path = mcap.with_suffix(".json")
     if not path.is_file():
@@ -115,19 +120,20 @@ def run_metrics(mcap: Path) -> tuple[float, float, float | None, Any]:
     try:
         done = json.loads(path.read_text())
         last = done["checkpoints"][-1]
-        cr, psnr, seen = float(last["cr_pct"]), float(last["psnr_db"]), last.get("observed_pct")
-        if seen is not None:
-            return cr, psnr, float(seen), None
+        cr, psnr, seen, views = (float(last["cr_pct"]), float(last["psnr_db"]), last.get("observed_pct"),
+                                 last.get("observed_view_pct"))
+        if seen is not None and views is not None:
+            return cr, psnr, float(seen), float(views), None, None
         cfg = config_from_json(json.dumps(done["config"]))
         ecfg = config_from_json(json.dumps(done["eval_config"]), EvalConfig)
     except (ValueError, KeyError, IndexError, TypeError) as e:
         raise ValueError(f"metrics file {path} is not dagsbench's ({type(e).__name__}: {e}); "
                          "re-run dagsbench --reevaluate for that run") from e
-    probe = coverage_probe_of(ground_truth_points(cfg.sim, ecfg).points_m, ecfg)
-    return cr, psnr, None, ObservedSurface(probe.points_m)
+    evaluator = SceneEvaluator(cfg.sim, ecfg)
+    return cr, psnr, None, None, evaluator.observed_surface(), evaluator
 
 
-TRAITS = ("path_m", "cells", "reached", "observed_pct")
+TRAITS = ("path_m", "cells", "reached", "observed_pct", "observed_view_pct")
 
 
 def within_scene_correlations(runs: list[tuple[str, dict[str, float], float]]
@@ -171,19 +177,21 @@ def main(argv: list[str] | None = None) -> int:
         sys.exit(f"error: bad --cell {args.cell}: must be > 0 m")
     from dynactivegs.errors import DagsError
 
-    columns = COLUMNS + (("C.R. %", "PSNR dB", "Obs. %") if args.metrics else ())
+    columns = COLUMNS + (("C.R. %", "PSNR dB", "Obs. %", "Obs. views %") if args.metrics else ())
     print("| " + " | ".join(columns) + " |\n" + "|---" * len(columns) + "|", flush=True)
     runs = []
     for path in args.mcap:
         try:
             metrics = run_metrics(path) if args.metrics else None
-            label, stats = path_stats(path, args.cell, metrics[3] if metrics else None)
+            label, stats = path_stats(path, args.cell, *(metrics[4:] if metrics else ()))
         except (DagsError, ValueError) as e:
             sys.exit(f"error: {e}")
         line = row(label, stats)
         if metrics is not None:
-            stats.setdefault("observed_pct", metrics[2])
-            line += f" {metrics[0]:.1f} | {metrics[1]:.2f} | {stats['observed_pct']:.1f} |"
+            if metrics[4] is None:                        # from the metrics file
+                stats.update(observed_pct=metrics[2], observed_view_pct=metrics[3])
+            line += (f" {metrics[0]:.1f} | {metrics[1]:.2f} | {stats['observed_pct']:.1f} |"
+                     f" {stats['observed_view_pct']:.1f} |")
             runs.append((label.split(" ")[1], stats, metrics[1]))
         print(line, flush=True)
     if args.metrics:

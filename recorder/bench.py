@@ -152,17 +152,15 @@ class _ProgressSink:
     """Snapshots the map at the checkpoint step counts, measures coverage every ``every`` steps and the
     observed surface (of the coverage probe's points) at every step."""
 
-    def __init__(self, checkpoints: tuple[int, ...], probe: Any, every: int, last: int) -> None:
-        from dynactivegs.eval.progress import ObservedSurface
-
+    def __init__(self, checkpoints: tuple[int, ...], probe: Any, observed: Any, every: int, last: int) -> None:
         self.checkpoints = set(checkpoints)
         self.probe = probe
         self.every = every
         self.last = last
         self.snapshots: dict[int, Any] = {}
         self.coverage: list[tuple[int, float]] = []
-        self.observed = ObservedSurface(probe.points_m)
-        self.observed_at: dict[int, float] = {}       # checkpoint step count -> observed surface %
+        self.observed = observed                      # an empty ObservedSurface of the probe's points
+        self.seen_at: dict[int, Any] = {}             # checkpoint step count -> the points seen by then
         self.last_stamp_ns = 0
 
     def on_step(self, rec: Any, truth: Any, states: list[object], metrics: dict[str, float]) -> None:
@@ -174,7 +172,7 @@ class _ProgressSink:
             from dynactivegs.splat.gaussians import Gaussians
 
             self.snapshots[done] = Gaussians(*(t.detach().clone() for t in g.tensors()))
-            self.observed_at[done] = self.observed.pct
+            self.seen_at[done] = self.observed.seen.copy()
         if done % self.every == 0 or done == self.last or done == 1:
             self.coverage.append((done, self.probe.of_gaussians(g)))
 
@@ -206,11 +204,21 @@ def evaluate_row(evaluator: Any, fraction: float, step: int, g: Any, trajectory_
 
 
 def observed_note(n_points: int) -> str:
-    """What a checkpoint row's ``observed_pct`` is (the metrics file says it beside the numbers)."""
+    """What a checkpoint row's ``observed_pct`` and ``observed_view_pct`` are (the metrics file says it beside
+    the numbers)."""
     from dynactivegs.eval.progress import OBSERVED_TOL_M
 
     return (f"observed_pct: % of the {n_points} coverage probe points the camera "
-            f"saw by the step (depth return within {OBSERVED_TOL_M * 100:g} cm of the point)")
+            f"saw by the step (depth return within {OBSERVED_TOL_M * 100:g} cm of the point); observed_view_pct: "
+            "% of the held-out views' pixels showing surface it saw (the probe points each view sees, each "
+            "weighted by the pixels its patch of surface fills)")
+
+
+def observed_extra(evaluator: Any, observed: Any, seen: Any, trajectory_xy_m: Any) -> dict[str, float]:
+    """A checkpoint row's ``observed_pct`` and ``observed_view_pct`` (:func:`observed_note`) from the mask
+    ``seen`` of ``observed``'s points."""
+    return {"observed_pct": float(seen.mean() * 100.0),
+            "observed_view_pct": evaluator.observed_view_pct(observed, trajectory_xy_m, seen)}
 
 
 def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
@@ -231,7 +239,7 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
     t_setup = time.perf_counter() - t0
     checkpoints = checkpoint_steps(spec.steps)
     probe = evaluator.coverage_probe()
-    progress = _ProgressSink(checkpoints, probe,
+    progress = _ProgressSink(checkpoints, probe, evaluator.observed_surface(),
                              max(1, spec.steps // COVERAGE_POINTS_PER_RUN), spec.steps)
     sinks: list[Any] = [progress]
     writer = None
@@ -267,7 +275,8 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
         writer.close({"interrupted": "false", "seconds": f"{t_run:.3f}", "refine_seconds": f"{t_ref:.3f}"})
     t2 = time.perf_counter()
     rows = [evaluate_row(evaluator, frac, step, progress.snapshots[step], res.trajectory_xy_m,
-                         refined if step == spec.steps else None, iters, observed_pct=progress.observed_at[step])
+                         refined if step == spec.steps else None, iters,
+                         **observed_extra(evaluator, progress.observed, progress.seen_at[step], res.trajectory_xy_m))
             for frac, step in zip(CHECKPOINT_FRACTIONS, checkpoints)]
     result = {
         "version": RESULT_VERSION, "preset": spec.preset, "scene": spec.scene, "seed": spec.seed,
@@ -291,9 +300,9 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
 def _logged_maps(mcap_path: Path, steps: list[int], observed: Any
                  ) -> tuple[dict[int, tuple[int, Any]], Any, Any, dict[int, float]]:
     """From a run's log: for each wanted step index, (the logged step used, its map snapshot), the
-    trajectory (T, 2) from ``/truth``, the refined map (None if the log has none) and the observed surface
-    % after each wanted step (``observed``, an :class:`~dynactivegs.eval.progress.ObservedSurface`, is
-    updated with every logged frame). The snapshot at the step itself is used when logged, else the nearest
+    trajectory (T, 2) from ``/truth``, the refined map (None if the log has none) and the points of
+    ``observed`` (an :class:`~dynactivegs.eval.progress.ObservedSurface`, updated with every logged frame) seen
+    after each wanted step (a bool mask). The snapshot at the step itself is used when logged, else the nearest
     later one (logs written before checkpoint snapshots were added have them every 50 steps)."""
     import numpy as np
 
@@ -303,14 +312,14 @@ def _logged_maps(mcap_path: Path, steps: list[int], observed: Any
     reader = LogReader(mcap_path)
     logged: dict[int, Any] = {}
     traj = []
-    seen_at: dict[int, float] = {}
+    seen_at: dict[int, Any] = {}
     wanted = set(steps)
     for st in reader.steps():
         traj.append((st["/truth"].robot.x_m, st["/truth"].robot.y_m))
         f = st["/frame"]
         observed.update(f.depth_m, f.K, f.T_world_cam)
         if st.step in wanted:
-            seen_at[st.step] = observed.pct
+            seen_at[st.step] = observed.seen.copy()
         if MAP_TOPIC in st:
             logged[st.step] = st
     maps: dict[int, tuple[int, Any]] = {}
@@ -344,11 +353,8 @@ def reevaluate_one(metrics_path: Path, eval_overrides: tuple[str, ...] = ()) -> 
     t0 = time.perf_counter()
     evaluator = SceneEvaluator(cfg.sim, ecfg)
     old_rows = done["checkpoints"]
-    from dynactivegs.eval.progress import ObservedSurface
-
-    probe_points = evaluator.coverage_probe().points_m
-    maps, traj, refined, seen_at = _logged_maps(mcap_path, [r["step"] - 1 for r in old_rows],
-                                                ObservedSurface(probe_points))
+    observed = evaluator.observed_surface()
+    maps, traj, refined, seen_at = _logged_maps(mcap_path, [r["step"] - 1 for r in old_rows], observed)
     last = max(r["step"] for r in old_rows)
     rows = []
     for r in old_rows:
@@ -356,8 +362,8 @@ def reevaluate_one(metrics_path: Path, eval_overrides: tuple[str, ...] = ()) -> 
         final = refined if r["step"] == last else None
         rows.append(evaluate_row(evaluator, r["fraction"], r["step"], g, traj, final,
                                  r.get("refine_iters", 0) if final is not None else 0, map_step=used + 1,
-                                 observed_pct=seen_at[r["step"] - 1]))
-    done.update(checkpoints=rows, observed_note=observed_note(len(probe_points)), eval_overrides=list(eval_overrides),
+                                 **observed_extra(evaluator, observed, seen_at[r["step"] - 1], traj)))
+    done.update(checkpoints=rows, observed_note=observed_note(len(observed.points_m)), eval_overrides=list(eval_overrides),
                 eval_config=json.loads(to_json(ecfg)),
                 seconds_eval=time.perf_counter() - t0, reevaluated=time.strftime("%Y-%m-%d"))
     tmp = metrics_path.with_suffix(".json.tmp")

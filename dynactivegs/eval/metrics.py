@@ -18,7 +18,7 @@ from dynactivegs.config import SimConfig
 from dynactivegs.eval.config import EvalConfig
 from dynactivegs.eval.geometry import GroundTruthPoints, Survey, geometry_metrics, ground_truth_points, survey
 from dynactivegs.eval.lpips import load_lpips
-from dynactivegs.eval.progress import CoverageProbe
+from dynactivegs.eval.progress import CoverageProbe, ObservedSurface
 from dynactivegs.eval.recon import ReconPoints, centre_points, rendered_points
 from dynactivegs.eval.rendering import render_metrics
 from dynactivegs.eval.views import camera_intrinsics, ground_truth_renders, heldout_views
@@ -98,6 +98,22 @@ class SceneEvaluator:
     def coverage_probe(self) -> CoverageProbe:
         """A probe of ``cfg.coverage_points`` ground-truth points at the C.R. threshold."""
         return coverage_probe_of(self.gt.points_m, self.cfg)
+
+    def observed_surface(self) -> ObservedSurface:
+        """An empty :class:`ObservedSurface` of the coverage probe's points, with their faces' normals."""
+        points = self.coverage_probe().points_m
+        _, i = self._gt_tree.query(points)                 # the probe is a subset of the ground-truth points
+        tri = self.scene.triangles_m[self.gt.face_idx[i]]
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        return ObservedSurface(points, normals=n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12))
+
+    def observed_view_pct(self, observed: ObservedSurface, trajectory_xy_m: np.ndarray | None,
+                          seen: np.ndarray | None = None) -> float:
+        """The share (%) of the held-out views' pixels (of the views :meth:`evaluate` renders for this
+        trajectory) showing surface that ``observed`` (from :meth:`observed_surface`) has seen
+        (:meth:`ObservedSurface.view_share`; ``seen``: a mask of its points instead of what it saw so far)."""
+        poses, _, depth = self.heldout(trajectory_xy_m)
+        return observed.view_share(poses, depth, self.K, seen)
 
     def recon_points(self, gaussians: Gaussians, method: str | None = None, backend: Backend = "auto") -> ReconPoints:
         """Reconstruction points of the map by ``method`` (default ``cfg.recon_method``)."""

@@ -12,7 +12,10 @@ the same probe points that the camera has seen so far, by its own depth (a point
 it projects into the image, in front of the camera, onto a pixel whose depth return lies within
 ``OBSERVED_TOL_M`` of the point's depth; a person or an object in front hides it). A map can only be as
 complete as what its path saw; PSNR on held-out views goes with it (benchmarks/results/
-apartment-1000-observed).
+apartment-1000-observed). :meth:`ObservedSurface.view_share` weighs the points as a set of views sees them
+(each by the pixels its patch of surface fills there): on the held-out views it is the share of their
+pixels that show surface the camera saw, which goes with their PSNR more closely still (a small room left
+unseen fills many held-out views and little of the flat's surface).
 """
 
 from __future__ import annotations
@@ -80,16 +83,20 @@ OBSERVED_TOL_M = 0.03
 
 
 class ObservedSurface:
-    """Which of a fixed set of surface points (M, 3) the camera has seen so far (module docstring)."""
+    """Which of a fixed set of surface points (M, 3) the camera has seen so far (module docstring).
 
-    def __init__(self, points_m: np.ndarray, tol_m: float = OBSERVED_TOL_M) -> None:
+    ``normals`` (M, 3), unit normals of the surface at the points, are needed for :meth:`view_share` only."""
+
+    def __init__(self, points_m: np.ndarray, tol_m: float = OBSERVED_TOL_M, normals: np.ndarray | None = None) -> None:
         assert points_m.ndim == 2 and points_m.shape[1] == 3 and tol_m > 0
         self.points_m = np.asarray(points_m, dtype=np.float64)
         self.tol_m = float(tol_m)
+        self.normals = None if normals is None else np.asarray(normals, dtype=np.float64)
+        assert self.normals is None or self.normals.shape == self.points_m.shape
         self.seen = np.zeros(len(self.points_m), dtype=np.bool_)
 
-    def update(self, depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray) -> None:
-        """Mark the points seen in one frame: z-depth image (H, W) in m (0: no return), intrinsics (3, 3) with
+    def visible(self, depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray) -> np.ndarray:
+        """Indices of the points a view sees: z-depth image (H, W) in m (0: no return), intrinsics (3, 3) with
         pixel centres at +0.5, camera-to-world (4, 4) in OpenCV axes."""
         h, w = depth_m.shape
         pc = (self.points_m - T_world_cam[:3, 3]) @ T_world_cam[:3, :3]      # world -> camera
@@ -100,9 +107,34 @@ class ObservedSurface:
         v = np.floor(K[1, 1] * pc[:, 1] / zs + K[1, 2])
         idx = np.flatnonzero(front & (u >= 0) & (u < w) & (v >= 0) & (v < h))
         d = depth_m[v[idx].astype(np.int64), u[idx].astype(np.int64)]
-        self.seen[idx[(d > 0) & (np.abs(d - z[idx]) <= self.tol_m)]] = True
+        return idx[(d > 0) & (np.abs(d - z[idx]) <= self.tol_m)]
+
+    def update(self, depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray) -> None:
+        """Mark the points seen in one frame (arguments as :meth:`visible`)."""
+        self.seen[self.visible(depth_m, K, T_world_cam)] = True
 
     @property
     def pct(self) -> float:
         """Percentage of the points seen so far (0 for no points)."""
         return float(self.seen.mean() * 100.0) if len(self.seen) else 0.0
+
+    def view_share(self, poses: np.ndarray, depths_m: np.ndarray, K: np.ndarray, seen: np.ndarray | None = None
+                   ) -> float:
+        """Percentage of what the views (poses (V, 4, 4), their true depth (V, H, W)) see of the surface that was
+        seen (``seen``, bool (M,); default: so far). Each point a view sees stands for the pixels its patch of
+        surface fills (points sample the surface uniformly): |cos| / r^2 of solid angle over a pixel's solid
+        angle, which falls as cos^3 of the angle off the optical axis, is |cos| r / z^3 with z the z-depth. So
+        this is, to the sampling, the share of the views' pixels showing surface the camera saw. NaN when the
+        views see none of the points."""
+        assert self.normals is not None, "view_share needs the points' normals"
+        seen = self.seen if seen is None else seen
+        assert seen.shape == self.seen.shape
+        num = den = 0.0
+        for T, depth in zip(poses, depths_m):
+            idx = self.visible(depth, K, T)
+            ray = self.points_m[idx] - T[:3, 3]
+            z = ray @ T[:3, 2]                                      # z-depth
+            w = np.abs(np.einsum("ij,ij->i", ray, self.normals[idx])) / z ** 3     # |cos| r / z^3: pixels per area
+            num += float(w[seen[idx]].sum())
+            den += float(w.sum())
+        return 100.0 * num / den if den > 0 else float("nan")

@@ -13,7 +13,9 @@ with two or more seeds). A "Mean" column averages each seed's values over the sc
 first, then gives mean +- std over seeds. "Best" compares the means of a column (lowest
 for Acc, Comp, depth L1, LPIPS; highest for C.R., PSNR, SSIM, Obs.); ties are all best. Obs. (%) is the
 surface the path let the camera see (:class:`dynactivegs.eval.progress.ObservedSurface`), what the map had
-to be built from; runs measured before it existed show "n/a" until ``dagsbench --reevaluate``.
+to be built from; Obs. views (%) the same weighed as the held-out views see the surface (the share of their
+pixels showing surface the camera saw: what PSNR can reach). Runs measured before they existed show "n/a"
+until ``dagsbench --reevaluate``.
 
 The ablation tables follow the paper's Tables 3-5. Their rows are chosen by what a run's
 config switches on (weighted mapping, selection variant, planner variant), not by preset
@@ -49,6 +51,7 @@ METRICS: tuple[MetricSpec, ...] = (
     MetricSpec("lpips", "LPIPS", False, 3),
     MetricSpec("depth_l1_cm", "Depth L1 (cm)", False, 2),
     MetricSpec("observed_pct", "Obs. (%)", True, 1),      # of the path, not the map: progress.ObservedSurface
+    MetricSpec("observed_view_pct", "Obs. views (%)", True, 1),   # ... weighed as the held-out views see it
 )
 METRIC_BY_KEY = {m.key: m for m in METRICS}
 FRACTIONS = (0.25, 0.5, 0.75, 1.0)
@@ -151,7 +154,7 @@ PRESET_ORDER = ("frontier", "baseline", "weighted", "motion_view", "full")
 
 
 def main_table(runs: Sequence[dict[str, Any]], metrics: Sequence[str] = ("acc_cm", "comp_cm", "cr_pct", "psnr_db",
-               "ssim", "lpips", "depth_l1_cm", "observed_pct"), fraction: float = 1.0) -> Table:
+               "ssim", "lpips", "depth_l1_cm", "observed_pct", "observed_view_pct"), fraction: float = 1.0) -> Table:
     """Rows = method x metric, columns = scenes + Mean; the best method per (metric, column) in bold."""
     methods = _ordered((r["preset"] for r in runs), PRESET_ORDER)
     scenes = _ordered(r["scene"] for r in runs)
@@ -208,7 +211,8 @@ PLANNER_ROWS: tuple[tuple[str, tuple[bool, str, str]], ...] = (
     ("dyn_edge", (True, "full", "dyn_edge")),
     ("dyn_edge_temporal (full)", (True, "full", "dyn_edge_temporal")),
 )
-ABLATION_METRICS = ("acc_cm", "comp_cm", "cr_pct", "psnr_db", "ssim", "depth_l1_cm", "observed_pct")
+ABLATION_METRICS = ("acc_cm", "comp_cm", "cr_pct", "psnr_db", "ssim", "depth_l1_cm", "observed_pct",
+                    "observed_view_pct")
 PLANNER_METRICS = ("cr_pct", "acc_cm", "psnr_db")
 
 

@@ -76,3 +76,52 @@ def test_observed_surface_is_what_the_frustum_saw_by_depth():
     # seen points stay seen: turning to the person's side and back adds the left half after all
     hidden.update(wall, K, T)
     assert hidden.pct == pytest.approx(obs.pct) and np.array_equal(hidden.seen, obs.seen)
+
+
+def _wall_depth(K: np.ndarray, T: np.ndarray, shape=(48, 64)) -> tuple[np.ndarray, np.ndarray]:
+    """The z-depth image of the wall of :func:`_wall_points` from pose T (0 where a ray misses it), and the y of
+    the wall point at each pixel (NaN where none)."""
+    v, u = np.mgrid[:shape[0], :shape[1]] + 0.5
+    d_cam = np.stack([(u - K[0, 2]) / K[0, 0], (v - K[1, 2]) / K[1, 1], np.ones(shape)], axis=-1)
+    d = d_cam @ T[:3, :3].T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (2.0 - T[0, 3]) / d[..., 0]
+    hit = T[:3, 3] + t[..., None] * d
+    ok = (t > 0) & (hit[..., 1] >= -4.0) & (hit[..., 1] < 4.0) & (hit[..., 2] >= 0.0) & (hit[..., 2] < 2.0)
+    return np.where(ok, t, 0.0).astype(np.float32), np.where(ok, hit[..., 1], np.nan)
+
+
+def test_the_views_share_of_observed_surface_weighs_points_by_the_pixels_they_fill():
+    K = np.array([[32.0, 0.0, 32.0], [0.0, 32.0, 24.0], [0.0, 0.0, 1.0]])
+    pts = _wall_points()
+    normals = np.tile([-1.0, 0.0, 0.0], (len(pts), 1))
+    obs = ObservedSurface(pts, normals=normals)
+    person = _wall_depth(K, camera_pose(0.0, 0.0, 0.0, 1.0))[0]
+    person[:, :32] = 1.0                                          # the camera saw the wall's y < 0 half only
+    obs.update(person, K, camera_pose(0.0, 0.0, 0.0, 1.0))
+    assert obs.pct == pytest.approx(25.0, abs=0.3)
+
+    def pixel_share(poses) -> float:                               # the share of the views' wall pixels seen
+        ys = np.concatenate([_wall_depth(K, T)[1].ravel() for T in poses])
+        ys = ys[np.isfinite(ys)]
+        return 100.0 * float(np.mean((ys >= -2.0) & (ys < 0.0)))
+
+    near_seen, near_unseen = camera_pose(1.0, -1.0, 0.0, 1.0), camera_pose(1.0, 1.0, 0.0, 1.0)
+    far_middle = camera_pose(-2.0, 0.5, 0.0, 1.0)
+    for poses in ([camera_pose(0.0, 0.0, 0.0, 1.0)], [near_seen], [near_unseen], [near_unseen, far_middle],
+                  [near_seen, far_middle, near_unseen]):
+        poses = np.stack(poses)
+        depths = np.stack([_wall_depth(K, T)[0] for T in poses])
+        assert obs.view_share(poses, depths, K) == pytest.approx(pixel_share(poses), abs=2.0)
+    # the far view sees 7.5 m of wall, 2 m of it seen, the near one 2 m, none seen: by pixels (the near wall
+    # fills its image, the far one a third of its rows) 6 %, by points (the far view sees 5 times as many) 22 %
+    both = np.stack([near_unseen, far_middle])
+    depths = np.stack([_wall_depth(K, T)[0] for T in both])
+    share = obs.view_share(both, depths, K)
+    counted = np.concatenate([obs.visible(d, K, T) for T, d in zip(both, depths)])
+    assert share == pytest.approx(6.3, abs=0.5) and 100.0 * obs.seen[counted].mean() == pytest.approx(22.2, abs=0.5)
+    # an explicit seen mask, and views that see nothing
+    assert obs.view_share(both, depths, K, seen=np.ones_like(obs.seen)) == pytest.approx(100.0)
+    assert np.isnan(obs.view_share(both, np.zeros_like(depths), K))
+    with pytest.raises(AssertionError):
+        ObservedSurface(pts).view_share(both, depths, K)         # no normals

@@ -56,6 +56,10 @@ def test_runs_write_metrics_at_every_checkpoint_and_a_log(finished):
         # the camera has seen some of the probe points after its first frames, and never unsees one
         seen = [c["observed_pct"] for c in r["checkpoints"]]
         assert 0.0 < seen[0] and seen == sorted(seen) and seen[-1] <= 100.0 and "observed_pct" in r["observed_note"]
+        # ... and some of what the held-out views show (the views are the same at every checkpoint here)
+        views = [c["observed_view_pct"] for c in r["checkpoints"]]
+        assert 0.0 < views[0] and views == sorted(views) and views[-1] <= 100.0
+        assert "observed_view_pct" in r["observed_note"]
         assert r["config"]["sim"]["camera"]["width_px"] == 64
         assert r["config"]["mapping"]["weighted"] is (p == "full")
         log = out / "runs" / p / "tiny-00-seed0.mcap"
@@ -125,6 +129,7 @@ def test_reevaluate_measures_finished_runs_again_from_their_logs(finished, tmp_p
         assert a["n_views"] == 3 and b["n_views"] == 4
         # the frames of the log give the observed surface the run measured online
         assert a["observed_pct"] == b["observed_pct"]
+        assert 0.0 < a["observed_view_pct"] <= 100.0          # on the 3 views now
     (copy / "runs" / "full" / "tiny-00-seed0.mcap").unlink()
     assert bench.main(tiny_args(copy, cache, "full", "--reevaluate")) == 2
     err = capsys.readouterr().err
@@ -330,20 +335,23 @@ def test_path_stats_counts_the_logged_path(finished, capsys, tmp_path):
     logs = [str(out / "runs" / p / "tiny-00-seed0.mcap") for p in ("baseline", "full")]
     assert mod.main(["--metrics", *logs]) == 0
     printed = capsys.readouterr().out.splitlines()
-    assert printed[0].endswith("| C.R. % | PSNR dB | Obs. % |")
+    assert printed[0].endswith("| C.R. % | PSNR dB | Obs. % | Obs. views % |")
     last = json.loads((out / "runs" / "full" / "tiny-00-seed0.json").read_text())["checkpoints"][-1]
-    assert printed[3].endswith(f"| {last['cr_pct']:.1f} | {last['psnr_db']:.2f} | {last['observed_pct']:.1f} |")
+    assert printed[3].endswith(f"| {last['cr_pct']:.1f} | {last['psnr_db']:.2f} | {last['observed_pct']:.1f} |"
+                               f" {last['observed_view_pct']:.1f} |")
     assert printed[-1].endswith("needs 3 runs or more in scenes with 2 or more")     # two runs of one scene
     # a metrics file from before the observed surface was recorded: measured from the log's frames, the same
     old = tmp_path / "old"
     shutil.copytree(out / "runs" / "full", old)
     done = json.loads((old / "tiny-00-seed0.json").read_text())
     for c in done["checkpoints"]:
-        del c["observed_pct"]
+        del c["observed_pct"], c["observed_view_pct"]
     (old / "tiny-00-seed0.json").write_text(json.dumps(done))
-    cr, psnr, seen, observed = mod.run_metrics(old / "tiny-00-seed0.mcap")
-    assert (cr, psnr, seen) == (last["cr_pct"], last["psnr_db"], None)
-    assert mod.path_stats(old / "tiny-00-seed0.mcap", 0.5, observed)[1]["observed_pct"] == last["observed_pct"]
+    cr, psnr, seen, views, observed, evaluator = mod.run_metrics(old / "tiny-00-seed0.mcap")
+    assert (cr, psnr, seen, views) == (last["cr_pct"], last["psnr_db"], None, None)
+    measured = mod.path_stats(old / "tiny-00-seed0.mcap", 0.5, observed, evaluator)[1]
+    assert measured["observed_pct"] == last["observed_pct"]
+    assert measured["observed_view_pct"] == pytest.approx(last["observed_view_pct"], abs=1e-9)
 
 
 def test_path_stats_correlates_path_traits_with_psnr_within_each_scene(tmp_path):
