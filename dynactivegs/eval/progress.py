@@ -118,23 +118,26 @@ class ObservedSurface:
         """Percentage of the points seen so far (0 for no points)."""
         return float(self.seen.mean() * 100.0) if len(self.seen) else 0.0
 
-    def view_share(self, poses: np.ndarray, depths_m: np.ndarray, K: np.ndarray, seen: np.ndarray | None = None
-                   ) -> float:
-        """Percentage of what the views (poses (V, 4, 4), their true depth (V, H, W)) see of the surface that was
-        seen (``seen``, bool (M,); default: so far). Each point a view sees stands for the pixels its patch of
-        surface fills (points sample the surface uniformly): |cos| / r^2 of solid angle over a pixel's solid
-        angle, which falls as cos^3 of the angle off the optical axis, is |cos| r / z^3 with z the z-depth. So
-        this is, to the sampling, the share of the views' pixels showing surface the camera saw. NaN when the
-        views see none of the points."""
-        assert self.normals is not None, "view_share needs the points' normals"
-        seen = self.seen if seen is None else seen
-        assert seen.shape == self.seen.shape
-        num = den = 0.0
+    def view_weights(self, poses: np.ndarray, depths_m: np.ndarray, K: np.ndarray) -> np.ndarray:
+        """float64 (M,): how many pixels of the views (poses (V, 4, 4), their true depth (V, H, W)) each point stands
+        for, summed over the views. Points sample the surface uniformly, so a point stands for a patch of it, which
+        fills |cos| / r^2 of solid angle; a pixel's solid angle falls as cos^3 of its angle off the optical axis, so
+        the patch fills pixels in proportion to |cos| r / z^3 (z the z-depth). 0 for points no view sees."""
+        assert self.normals is not None, "view weights need the points' normals"
+        w = np.zeros(len(self.points_m))
         for T, depth in zip(poses, depths_m):
             idx = self.visible(depth, K, T)
             ray = self.points_m[idx] - T[:3, 3]
-            z = ray @ T[:3, 2]                                      # z-depth
-            w = np.abs(np.einsum("ij,ij->i", ray, self.normals[idx])) / z ** 3     # |cos| r / z^3: pixels per area
-            num += float(w[seen[idx]].sum())
-            den += float(w.sum())
-        return 100.0 * num / den if den > 0 else float("nan")
+            z = ray @ T[:3, 2]
+            w[idx] += np.abs(np.einsum("ij,ij->i", ray, self.normals[idx])) / z ** 3
+        return w
+
+    def view_share(self, poses: np.ndarray, depths_m: np.ndarray, K: np.ndarray, seen: np.ndarray | None = None
+                   ) -> float:
+        """Percentage of the views' pixels (to the sampling: :meth:`view_weights`) that show surface seen
+        (``seen``, bool (M,); default: seen so far). NaN when the views see none of the points."""
+        seen = self.seen if seen is None else seen
+        assert seen.shape == self.seen.shape
+        w = self.view_weights(poses, depths_m, K)
+        den = float(w.sum())
+        return 100.0 * float(w[seen].sum()) / den if den > 0 else float("nan")

@@ -354,6 +354,35 @@ def test_path_stats_counts_the_logged_path(finished, capsys, tmp_path):
     assert measured["observed_view_pct"] == pytest.approx(last["observed_view_pct"], abs=1e-9)
 
 
+def test_unseen_surface_finds_the_held_out_pixels_the_camera_never_saw(finished, capsys, tmp_path):
+    """benchmarks/unseen_surface.py on the sweep's runs: the observed surface and its share of the held-out
+    views are the ones dagsbench recorded, the rooms' losses are parts of what was lost, and the floor plans
+    are drawn; bad arguments are one line."""
+    out, _ = finished
+    mod = _benchmark_module("unseen_surface")
+    logs = [out / "runs" / p / "tiny-00-seed0.mcap" for p in ("baseline", "full")]
+    png = tmp_path / "unseen.png"
+    assert mod.main([*map(str, logs), "--out", str(png)]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[0].startswith("| run | Obs. % | Obs. views % |") and png.stat().st_size > 0
+    for log, line in zip(logs, printed[2:4]):
+        last = json.loads(log.with_suffix(".json").read_text())["checkpoints"][-1]
+        assert line.startswith(f"| {log.parent.name} tiny-00 seed 0 | {last['observed_pct']:.1f} | "
+                               f"{last['observed_view_pct']:.1f} |")
+    run = mod.unseen_of_run(logs[1])
+    o, w = run["observed"], run["weights"]
+    share = 100.0 * w[o.seen].sum() / w.sum()
+    last = json.loads(logs[1].with_suffix(".json").read_text())["checkpoints"][-1]
+    assert share == pytest.approx(last["observed_view_pct"], abs=1e-9) and w.min() >= 0.0
+    rooms = mod.room_losses(run, top=100)
+    assert rooms and all(pct >= 0.0 for _, pct in rooms)
+    assert sum(pct for _, pct in rooms) <= 100.0 - share + 1e-6        # a point lies in one room at most
+    with pytest.raises(SystemExit, match="give a .png path"):
+        mod.main([str(logs[0]), "--out", str(tmp_path / "unseen.jpg")])
+    with pytest.raises(SystemExit, match="error: .*missing.mcap"):
+        mod.main([str(out / "missing.mcap")])
+
+
 def test_path_stats_correlates_path_traits_with_psnr_within_each_scene(tmp_path):
     """Scenes differ in how high PSNR goes: the correlation is taken relative to each scene's mean, so a scene
     with more cells and less PSNR than another does not hide more cells going with more PSNR within both."""
