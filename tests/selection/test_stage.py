@@ -560,6 +560,28 @@ def test_without_the_subregion_rule_full_takes_the_best_view_anywhere_and_keeps_
     np.testing.assert_allclose(no_motion.cand_score, gain_cost.cand_score)
 
 
+def test_with_boundary_gain_the_faces_around_seen_free_space_outweigh_unknown_volume():
+    free = three_rooms()                                             # the robot in C
+    # L seen as free space, its walls' faces uncertain (0.8); R never observed (U_s 1, n_obs 0) behind its doorway
+    fo, mo = fields_for(free, [(0.3, 0.3, 2.7, 2.7, 0.8), (6.5, 0.5, 8.5, 2.5, 1.0)], [])
+    n_obs = np.ones(fo.n_obs.shape, np.float32)
+    fill(n_obs, 6.5, 0.5, 8.5, 2.5, 0.0, VOX, True)
+    fo = dataclasses.replace(fo, n_obs=n_obs)
+
+    def pick(boundary: bool) -> SelectionOut:
+        cfg = selection.SelectionConfig(variant="static_gain", boundary_gain=boundary)
+        return select_once(cfg, free, fo, mo, (4.5, 1.5))
+
+    volume, boundary = pick(False), pick(True)
+    assert volume.target_xy_m[0] > 5.5                               # R: a room's volume of unknown
+    assert boundary.target_xy_m[0] < 3.5                             # L: the faces of its walls
+    x_of = lambda out: out.node_xy_m[out.cand_node, 0]
+    # R's views keep only its doorway's layer; L's keep its walls' faces, the free space in front of them not
+    assert boundary.cand_gain[x_of(boundary) > 6.5].max() < 0.2 * volume.cand_gain[x_of(volume) > 6.5].max()
+    in_l = x_of(boundary) < 2.5
+    assert 0.0 < boundary.cand_gain[in_l].max() < volume.cand_gain[x_of(volume) < 2.5].max()
+
+
 def test_with_stand_weight_views_from_where_the_robot_stood_lose_to_the_same_views_elsewhere():
     free = three_rooms()                                             # the robot in C, facing R
     fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0), (6.5, 0.5, 8.5, 2.5, 1.0)], [])   # L and R alike
