@@ -217,7 +217,7 @@ def observed_note(n_points: int) -> str:
 def observed_extra(evaluator: Any, observed: Any, seen: Any, trajectory_xy_m: Any) -> dict[str, float]:
     """A checkpoint row's ``observed_pct`` and ``observed_view_pct`` (:func:`observed_note`) from the mask
     ``seen`` of ``observed``'s points."""
-    return {"observed_pct": float(seen.mean() * 100.0),
+    return {"observed_pct": float(seen.mean() * 100.0) if len(seen) else 0.0,
             "observed_view_pct": evaluator.observed_view_pct(observed, trajectory_xy_m, seen)}
 
 
@@ -239,7 +239,7 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
     t_setup = time.perf_counter() - t0
     checkpoints = checkpoint_steps(spec.steps)
     probe = evaluator.coverage_probe()
-    progress = _ProgressSink(checkpoints, probe, evaluator.observed_surface(),
+    progress = _ProgressSink(checkpoints, probe, evaluator.observed_surface(probe),
                              max(1, spec.steps // COVERAGE_POINTS_PER_RUN), spec.steps)
     sinks: list[Any] = [progress]
     writer = None
@@ -298,7 +298,7 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
 
 
 def _logged_maps(mcap_path: Path, steps: list[int], observed: Any
-                 ) -> tuple[dict[int, tuple[int, Any]], Any, Any, dict[int, float]]:
+                 ) -> tuple[dict[int, tuple[int, Any]], Any, Any, dict[int, Any]]:
     """From a run's log: for each wanted step index, (the logged step used, its map snapshot), the
     trajectory (T, 2) from ``/truth``, the refined map (None if the log has none) and the points of
     ``observed`` (an :class:`~dynactivegs.eval.progress.ObservedSurface`, updated with every logged frame) seen

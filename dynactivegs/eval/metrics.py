@@ -99,9 +99,10 @@ class SceneEvaluator:
         """A probe of ``cfg.coverage_points`` ground-truth points at the C.R. threshold."""
         return coverage_probe_of(self.gt.points_m, self.cfg)
 
-    def observed_surface(self) -> ObservedSurface:
-        """An empty :class:`ObservedSurface` of the coverage probe's points, with their faces' normals."""
-        points = self.coverage_probe().points_m
+    def observed_surface(self, probe: CoverageProbe | None = None) -> ObservedSurface:
+        """An empty :class:`ObservedSurface` of the coverage probe's points (``probe``, when already drawn from
+        :meth:`coverage_probe`), with their faces' normals."""
+        points = (self.coverage_probe() if probe is None else probe).points_m
         _, i = self._gt_tree.query(points)                 # the probe is a subset of the ground-truth points
         tri = self.scene.triangles_m[self.gt.face_idx[i]]
         n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
