@@ -704,19 +704,19 @@ def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, a
         travel = length_d
     reach = np.isfinite(length_d) & ~banned.all(axis=1)
     nodes = np.nonzero(reach)[0]
-    fa = _fields_arrays(rec.fields, rec, xy_nodes[nodes], cfg.visibility.range_m, with_observed=True)
+    fa = _fields_arrays(rec.fields, rec, xy_nodes[nodes], cfg.visibility.range_m, with_observed=cfg.boundary_gain)
     ny = cfg.visibility.n_yaws
     if fa is None or len(nodes) == 0:
         gain = np.zeros((len(nodes), ny))
         risk = np.zeros((len(nodes), ny))
     else:
-        occ, u_s, u_m, origin, voxel, observed = fa
+        occ, u_s, u_m, origin, voxel = fa[:5]
         cells = np.argwhere(grid.occupied(cfg.occupancy))
         occ = occ | column_occluders(grid.cell_to_world(cells), grid.top_m[cells[:, 0], cells[:, 1]].astype(np.float64),
                                      cfg.occupancy.band_hi_m - voxel, origin, voxel, occ.shape)   # walls: top in the band's top voxel
         if cfg.boundary_gain:
             # eq. (8) over the voxels next to the known free space only (SelectionConfig.boundary_gain)
-            free = observed & ~occ
+            free = fa[5] & ~occ                                    # observed, no occluder
             u_s = np.where(ndimage.binary_dilation(free) & ~free, u_s / voxel, 0.0).astype(np.float32)   # x m^2
         gs, gm = bin_gains(vis, occ, u_s, u_m, origin, voxel, xy_nodes[nodes])
         gain, risk = view_gains(vis, gs), view_gains(vis, gm)                      # eqs. (8), (9)
