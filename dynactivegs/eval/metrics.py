@@ -80,6 +80,7 @@ class SceneEvaluator:
         self._gt_tree = cKDTree(self.gt.points_m)
         self.K = camera_intrinsics(sim.camera)
         self._survey: Survey | None = None
+        self._heldout: tuple[bytes | None, tuple[np.ndarray, np.ndarray, np.ndarray]] | None = None
         self.lpips_model, self.lpips_note = load_lpips(cfg.lpips_weights_path)
 
     @property
@@ -129,11 +130,17 @@ class SceneEvaluator:
                                views_note=self.survey.note())
 
     def heldout(self, trajectory_xy_m: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Held-out poses (V, 4, 4) away from the trajectory (T, 2), and their static-only rgb and depth."""
-        poses = heldout_views(self.freespace, self.sim.robot.radius_m, self.sim.camera, self.cfg.n_views,
-                              self.cfg.view_seed, self.scene.name, trajectory_xy_m, self.cfg.min_trajectory_dist_m)
-        rgb, depth = ground_truth_renders(self.renderer, poses, self.sim.camera)
-        return poses, rgb, depth
+        """Held-out poses (V, 4, 4) away from the trajectory (T, 2), and their static-only rgb and depth.
+        Those of the last trajectory asked for are kept and returned again (shared: do not write to them): a run's
+        checkpoints measure the map, the refined map and the observed surface on the same views."""
+        key = None if trajectory_xy_m is None else np.ascontiguousarray(trajectory_xy_m, np.float64).tobytes()
+        if self._heldout is None or self._heldout[0] != key:
+            poses = heldout_views(self.freespace, self.sim.robot.radius_m, self.sim.camera, self.cfg.n_views,
+                                  self.cfg.view_seed, self.scene.name, trajectory_xy_m,
+                                  self.cfg.min_trajectory_dist_m)
+            rgb, depth = ground_truth_renders(self.renderer, poses, self.sim.camera)
+            self._heldout = (key, (poses, rgb, depth))
+        return self._heldout[1]
 
     def evaluate(self, gaussians: Gaussians, *, step: int, trajectory_xy_m: np.ndarray | None,
                  method: str | None = None, backend: Backend = "auto") -> Metrics:

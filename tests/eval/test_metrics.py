@@ -117,3 +117,16 @@ def test_gaussians_nearer_than_the_cameras_minimum_depth_do_not_count(evaluator)
     kept, blocked = (render_metrics(with_blob, T[None], rgb, depth, K, near_plane=p, backend="cpu")
                      for p in (SIM.camera.min_depth_m, 0.01))
     assert kept.psnr_db > blocked.psnr_db + 10.0 and kept.depth_l1_cm < blocked.depth_l1_cm / 10
+
+
+def test_held_out_views_of_the_last_trajectory_are_kept_and_those_of_another_are_drawn_anew(evaluator):
+    traj = np.array([[1.0, 1.0], [1.5, 1.0]])
+    first = evaluator.heldout(traj)
+    again = evaluator.heldout(traj.copy())                 # equal values: the same arrays, nothing rendered
+    assert all(a is b for a, b in zip(first, again))
+    other = evaluator.heldout(traj + 0.5)
+    assert other[0] is not first[0] and len(other[0]) == len(first[0])
+    fresh = SceneEvaluator(evaluator.sim, evaluator.cfg).heldout(traj + 0.5)
+    for a, b in zip(other, fresh):
+        np.testing.assert_array_equal(a, b)               # what is kept is what a fresh evaluator renders
+    assert evaluator.heldout(None)[0] is evaluator.heldout(None)[0]
