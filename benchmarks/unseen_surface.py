@@ -125,6 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.out is not None and args.out.suffix.lower() != ".png":
         sys.exit(f"error: bad --out {args.out}: give a .png path")
     from dynactivegs.errors import DagsError
+    from dynactivegs.eval.progress import weighted_share
 
     print("| run | Obs. % | Obs. views % | held-out pixels lost by room (% of all) |\n|---|---|---|---|", flush=True)
     runs = []
@@ -133,8 +134,7 @@ def main(argv: list[str] | None = None) -> int:
             run = unseen_of_run(path)
         except (DagsError, ValueError) as e:
             sys.exit(f"error: {e}")
-        w = run["weights"]
-        run["share"] = 100.0 * float(w[run["observed"].seen].sum()) / float(w.sum()) if w.sum() > 0 else float("nan")
+        run["share"] = weighted_share(run["weights"], run["observed"].seen)
         rooms = ", ".join(f"{name} {pct:.1f}" for name, pct in room_losses(run)) or "-"
         print(f"| {run['label']} | {run['observed'].pct:.1f} | {run['share']:.1f} | {rooms} |", flush=True)
         runs.append(run)

@@ -138,6 +138,10 @@ class ObservedSurface:
         (``seen``, bool (M,); default: seen so far). NaN when the views see none of the points."""
         seen = self.seen if seen is None else seen
         assert seen.shape == self.seen.shape
-        w = self.view_weights(poses, depths_m, K)
-        den = float(w.sum())
-        return 100.0 * float(w[seen].sum()) / den if den > 0 else float("nan")
+        return weighted_share(self.view_weights(poses, depths_m, K), seen)
+
+
+def weighted_share(weights: np.ndarray, seen: np.ndarray) -> float:
+    """Percentage of the total of ``weights`` (M,) on the points ``seen`` (bool (M,)); NaN when the total is 0."""
+    den = float(weights.sum())
+    return 100.0 * float(weights[seen].sum()) / den if den > 0 else float("nan")
