@@ -22,7 +22,6 @@ else the defaults (``--set eval.KEY=VALUE`` style overrides are not taken: pass 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -32,7 +31,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from psnr_breakdown import logged_config  # noqa: E402  (the same reading of a run log)
+from psnr_breakdown import logged_config, logged_eval_config  # noqa: E402  (the same reading of a run log)
 
 ROOM_STEP_M = 0.06
 """A point belongs to the room that holds it moved this far along its normal (off the wall's face)."""
@@ -41,22 +40,12 @@ ROOM_STEP_M = 0.06
 def unseen_of_run(mcap: Path) -> dict[str, Any]:
     """Replay one run log: its label, trajectory (T, 2), held-out poses, the ObservedSurface after the last
     frame, each probe point's held-out pixel weight, and the scene (for rooms)."""
-    from dynactivegs.config import config_from_json
-    from dynactivegs.eval.config import EvalConfig
     from dynactivegs.eval.metrics import SceneEvaluator
     from replay.source import LogReader
 
     reader = LogReader(mcap)
     cfg = logged_config(reader, mcap)
-    ecfg = EvalConfig()
-    metrics = mcap.with_suffix(".json")
-    if metrics.is_file():
-        try:
-            ecfg = config_from_json(json.dumps(json.loads(metrics.read_text())["eval_config"]), EvalConfig)
-        except (ValueError, KeyError, TypeError) as e:
-            raise ValueError(f"metrics file {metrics} is not dagsbench's ({type(e).__name__}: {e}); move it away "
-                             "to use the default evaluation") from e
-    evaluator = SceneEvaluator(cfg.sim, ecfg)
+    evaluator = SceneEvaluator(cfg.sim, logged_eval_config(mcap))
     observed = evaluator.observed_surface()
     traj = []
     for st in reader.steps():

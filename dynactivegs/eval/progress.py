@@ -141,6 +141,23 @@ class ObservedSurface:
         return weighted_share(self.view_weights(poses, depths_m, K), seen)
 
 
+def pixel_points(poses: np.ndarray, depths_m: np.ndarray, K: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The surface points a set of views shows, one per pixel: poses (V, 4, 4) camera-to-world in OpenCV axes,
+    their z-depth images (V, H, W) in m (0: no return), intrinsics (3, 3) with pixel centres at +0.5. Returns
+    float64 (M, 3) world points of the pixels with a return, and bool (V, H, W), True at those pixels, in the
+    order of the points (``mask[mask] = seen`` puts a per-point result back on the pixels). An
+    :class:`ObservedSurface` of these points, updated with a run's frames, says which pixels of the views show
+    surface the run's camera saw: what :meth:`ObservedSurface.view_share` estimates from the probe points."""
+    depths = np.asarray(depths_m, np.float64)
+    assert depths.ndim == 3 and len(poses) == len(depths), "depths must be (V, H, W), one per pose"
+    _, h, w = depths.shape
+    v, u = np.mgrid[0:h, 0:w]
+    rays = np.stack([(u + 0.5 - K[0, 2]) / K[0, 0], (v + 0.5 - K[1, 2]) / K[1, 1], np.ones((h, w))], axis=-1)
+    mask = depths > 0
+    points = [(rays[m] * d[m][:, None]) @ T[:3, :3].T + T[:3, 3] for T, d, m in zip(poses, depths, mask)]
+    return (np.concatenate(points) if points else np.zeros((0, 3))), mask
+
+
 def weighted_share(weights: np.ndarray, seen: np.ndarray) -> float:
     """Percentage of the total of ``weights`` (M,) on the points ``seen`` (bool (M,)); NaN when the total is 0."""
     den = float(weights.sum())

@@ -10,7 +10,9 @@ Per view, then averaged over views (the 3DGS convention):
   otherwise ``None`` and the reason;
 - where the PSNR is lost (:func:`psnr_split`): the share of the squared colour error on pixels
   the map leaves empty, on pixels whose rendered surface is too near or too far, and the PSNR
-  over the rest, where the surface is in the right place and only its colours can be wrong.
+  over the rest, where the surface is in the right place and only its colours can be wrong;
+- whether it is lost where the path never looked (:func:`seen_split`): the share of the squared error on
+  pixels showing surface the run's camera never saw, and the PSNR over the others.
 """
 
 from __future__ import annotations
@@ -109,6 +111,37 @@ def psnr_split(pred_rgb: np.ndarray, pred_depth_m: np.ndarray, pred_alpha: np.nd
         right_psnr = math.inf if right_mse == 0 else -10.0 * math.log10(right_mse)
     return PsnrSplit(float(hole.mean()), share(hole), float(front.mean()), share(front), float(behind.mean()),
                      share(behind), right_psnr)
+
+
+@dataclass(frozen=True)
+class SeenSplit:
+    """One view's squared colour error split by whether the run's camera saw the surface at each pixel
+    (:func:`dynactivegs.eval.progress.pixel_points`): what a map could not know, and what it got wrong. Sums
+    and counts, so that views pool (:meth:`pooled`): a view that shows little seen surface weighs little."""
+
+    seen_px: int                  # pixels showing surface the camera saw
+    seen_sse: float               # their summed squared error (per pixel the mean over RGB, in [0, 1])
+    unseen_px: int                # the other pixels (surface never seen, or no surface)
+    unseen_sse: float
+
+    @staticmethod
+    def pooled(splits: list[SeenSplit]) -> tuple[float, float, float]:
+        """Over all pixels of ``splits``: the unseen pixels' share of the pixels and of the squared error (in
+        [0, 1]), and the PSNR (dB) over the seen pixels (nan when there are none, inf when they are exact)."""
+        seen_px, unseen_px = sum(x.seen_px for x in splits), sum(x.unseen_px for x in splits)
+        seen_sse, unseen_sse = sum(x.seen_sse for x in splits), sum(x.unseen_sse for x in splits)
+        px, sse = seen_px + unseen_px, seen_sse + unseen_sse
+        psnr_seen = (math.nan if seen_px == 0 else math.inf if seen_sse == 0
+                     else -10.0 * math.log10(seen_sse / seen_px))
+        return (unseen_px / px if px else math.nan), (unseen_sse / sse if sse > 0 else 0.0), psnr_seen
+
+
+def seen_split(pred_rgb: np.ndarray, true_rgb: np.ndarray, seen: np.ndarray) -> SeenSplit:
+    """The :class:`SeenSplit` of one view: rgb (H, W, 3) as for :func:`psnr_db`, ``seen`` bool (H, W)."""
+    err = ((_image(pred_rgb).clamp(0, 1) - _image(true_rgb)) ** 2).mean(-1).numpy()
+    seen = np.asarray(seen, bool)
+    assert seen.shape == err.shape, f"seen must be (H, W) like the images; got {seen.shape}"
+    return SeenSplit(int(seen.sum()), float(err[seen].sum()), int((~seen).sum()), float(err[~seen].sum()))
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from dynactivegs.eval.progress import CoverageProbe, ObservedSurface, checkpoint_steps
+from dynactivegs.eval.progress import CoverageProbe, ObservedSurface, checkpoint_steps, pixel_points
 from dynactivegs.sim.robot import camera_pose
 from dynactivegs.splat import Gaussians
 
@@ -125,3 +125,30 @@ def test_the_views_share_of_observed_surface_weighs_points_by_the_pixels_they_fi
     assert np.isnan(obs.view_share(both, np.zeros_like(depths), K))
     with pytest.raises(AssertionError):
         ObservedSurface(pts).view_share(both, depths, K)         # no normals
+
+
+def test_the_pixels_of_views_that_show_surface_the_camera_saw():
+    """pixel_points puts one point on the surface at each pixel with a return; an ObservedSurface of them, fed a
+    run's frames, marks exactly the pixels whose wall point the run saw (here: the wall's y < 0 half)."""
+    K = np.array([[32.0, 0.0, 32.0], [0.0, 32.0, 24.0], [0.0, 0.0, 1.0]])
+    run_pose = camera_pose(0.0, 0.0, 0.0, 1.0)
+    frame = _wall_depth(K, run_pose)[0]
+    frame[:, :32] = 1.0                                           # a person hides the wall's y >= 0 half
+    poses = np.stack([camera_pose(1.0, -1.0, 0.0, 1.0), camera_pose(-2.0, 0.5, 0.3, 1.0), camera_pose(1.0, 1.0, 0, 1)])
+    walls = [_wall_depth(K, T) for T in poses]
+    depths = np.stack([d for d, _ in walls])
+    depths[1, :5, :] = 0.0                                        # some pixels without a return
+    points, mask = pixel_points(poses, depths, K)
+    assert mask.shape == depths.shape and np.array_equal(mask, depths > 0) and len(points) == mask.sum()
+    assert np.allclose(points[:, 0], 2.0, atol=1e-6)              # on the wall ...
+    ys = np.concatenate([y[d > 0] for (_, y), d in zip(walls, depths)])
+    assert np.allclose(points[:, 1], ys, atol=1e-6)               # ... where each pixel's ray meets it
+    obs = ObservedSurface(points)
+    obs.update(frame, K, run_pose)
+    seen = np.zeros_like(mask)
+    seen[mask] = obs.seen
+    for (_, y), d, s in zip(walls, depths, seen):
+        inside = (y >= -2.0 + 0.07) & (y < -0.07) & (d > 0)        # seen half, away from the frustum's edges
+        outside = ((y >= 0.07) | (y < -2.07)) & (d > 0)
+        assert s[inside].all() and not s[outside].any() and not s[d == 0].any()
+    assert not seen[2].any() and seen[0].mean() > 0.9             # the near views of each half

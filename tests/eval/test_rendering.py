@@ -10,7 +10,8 @@ import torch
 from scipy import ndimage
 
 from dynactivegs.eval.lpips import LpipsAlex, load_lpips
-from dynactivegs.eval.rendering import depth_l1_cm, psnr_db, psnr_split, render_metrics, ssim_value
+from dynactivegs.eval.rendering import (SeenSplit, depth_l1_cm, psnr_db, psnr_split, render_metrics, seen_split,
+                                       ssim_value)
 from dynactivegs.splat import Gaussians
 from dynactivegs.sim.render import intrinsics
 from dynactivegs.sim.robot import camera_pose
@@ -24,6 +25,29 @@ def test_psnr_of_identical_images_is_inf_and_of_a_known_mse_is_known():
     assert psnr_db(shifted, img) == pytest.approx(20.0, abs=1e-9)
     plus16 = img + np.uint8(16)                                  # MSE (16 / 255)^2
     assert psnr_db(plus16, img) == pytest.approx(20 * math.log10(255 / 16), abs=1e-9)
+
+
+def test_seen_split_pools_the_error_of_seen_and_unseen_pixels_over_views():
+    h, w = 10, 20
+    true = np.full((h, w, 3), 0.5)
+    pred = true.copy()
+    pred[:, :5] += 0.1                                 # error 0.01 on a quarter, all of it unseen ...
+    pred[:, 5:10] += 0.01                              # ... and 1e-4 on a quarter that was seen
+    seen = np.zeros((h, w), bool)
+    seen[:, 5:] = True
+    a = seen_split(pred, true, seen)
+    assert (a.seen_px, a.unseen_px) == (150, 50)
+    assert a.unseen_sse == pytest.approx(50 * 0.01) and a.seen_sse == pytest.approx(50 * 1e-4)
+    unseen_px, unseen_err, psnr_seen = SeenSplit.pooled([a])
+    assert unseen_px == 0.25 and unseen_err == pytest.approx(0.5 / 0.505)
+    assert psnr_seen == pytest.approx(-10 * np.log10(50 * 1e-4 / 150))
+    # a view that saw nothing adds its pixels to the unseen ones and nothing to the seen PSNR
+    b = seen_split(pred, true, np.zeros((h, w), bool))
+    unseen_px, _, psnr_both = SeenSplit.pooled([a, b])
+    assert unseen_px == pytest.approx(250 / 400) and psnr_both == pytest.approx(psnr_seen)
+    assert np.isnan(SeenSplit.pooled([b])[2]) and SeenSplit.pooled([seen_split(true, true, seen)])[2] == np.inf
+    with pytest.raises(AssertionError):
+        seen_split(pred, true, seen[:, :5])
 
 
 def test_psnr_split_puts_each_pixel_in_one_class_and_the_error_where_it_is():
