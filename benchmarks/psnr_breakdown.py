@@ -25,9 +25,10 @@ differ, this tells the path's share from the map's.
 
 It prints the PSNR, each class's share of the pixels and of the squared error, the PSNR over
 the ``right`` pixels alone (what the colours of correctly placed Gaussians reach), the unseen
-pixels' shares and the PSNR over the seen ones, and the worst views. All numbers are means over views,
-except the unseen / seen columns, which pool the pixels of all views (a view showing little seen surface
-would otherwise weigh as much as one that shows nothing else).
+pixels' shares, the PSNR over the seen ones and, beside it, over all pixels the same way, and the worst
+views. All numbers are means over views, except the unseen / seen columns, which pool the pixels of all
+views (a view showing little seen surface would otherwise weigh as much as one that shows nothing else);
+pooled PSNR lies below the mean of per-view PSNRs, so compare the seen one with the pooled one beside it.
 """
 
 from __future__ import annotations
@@ -132,7 +133,7 @@ def main(argv: list[str] | None = None) -> int:
     from dynactivegs.eval.rendering import SeenSplit
 
     head = ("| run | PSNR | hole px / err | front px / err | behind px / err | PSNR right px | unseen px / err "
-            "| PSNR seen px | worst views (dB) |\n|---|---|---|---|---|---|---|---|---|")
+            "| PSNR seen / all px | worst views (dB) |\n|---|---|---|---|---|---|---|---|---|")
     print(head, flush=True)
     for path in args.mcap:
         try:
@@ -140,13 +141,13 @@ def main(argv: list[str] | None = None) -> int:
         except (DagsError, ValueError) as e:
             sys.exit(f"error: {e}")
         mean = {k: float(np.nanmean([r[k] for r in rows])) for k in rows[0] if k != "seen"}
-        unseen_px, unseen_err, seen_psnr = SeenSplit.pooled([r["seen"] for r in rows])
+        unseen_px, unseen_err, seen_psnr, all_psnr = SeenSplit.pooled([r["seen"] for r in rows])
         worst = ", ".join(f"{x:.1f}" for x in sorted(r["psnr_db"] for r in rows)[:args.worst])
         print(f"| {label} | {mean['psnr_db']:.2f} | "
               + " | ".join(f"{100 * mean[f'{c}_px']:.1f} / {100 * mean[f'{c}_err']:.1f} %"
                            for c in ("hole", "front", "behind"))
               + f" | {mean['right_psnr_db']:.2f} | {100 * unseen_px:.1f} / {100 * unseen_err:.1f} %"
-              + f" | {seen_psnr:.2f} | {worst} |", flush=True)
+              + f" | {seen_psnr:.2f} / {all_psnr:.2f} | {worst} |", flush=True)
     return 0
 
 

@@ -125,15 +125,17 @@ class SeenSplit:
     unseen_sse: float
 
     @staticmethod
-    def pooled(splits: list[SeenSplit]) -> tuple[float, float, float]:
+    def pooled(splits: list[SeenSplit]) -> tuple[float, float, float, float]:
         """Over all pixels of ``splits``: the unseen pixels' share of the pixels and of the squared error (in
-        [0, 1]), and the PSNR (dB) over the seen pixels (nan when there are none, inf when they are exact)."""
+        [0, 1]), the PSNR (dB) over the seen pixels and over all pixels (nan without pixels, inf when exact).
+        Pooled PSNR is that of the mean squared error over all the views' pixels, which lies below the mean of
+        per-view PSNRs when views differ (compare the two pooled values with each other)."""
         seen_px, unseen_px = sum(x.seen_px for x in splits), sum(x.unseen_px for x in splits)
         seen_sse, unseen_sse = sum(x.seen_sse for x in splits), sum(x.unseen_sse for x in splits)
         px, sse = seen_px + unseen_px, seen_sse + unseen_sse
-        psnr_seen = (math.nan if seen_px == 0 else math.inf if seen_sse == 0
-                     else -10.0 * math.log10(seen_sse / seen_px))
-        return (unseen_px / px if px else math.nan), (unseen_sse / sse if sse > 0 else 0.0), psnr_seen
+        db = lambda e, n: math.nan if n == 0 else math.inf if e == 0 else -10.0 * math.log10(e / n)  # noqa: E731
+        return ((unseen_px / px if px else math.nan), (unseen_sse / sse if sse > 0 else 0.0), db(seen_sse, seen_px),
+                db(sse, px))
 
 
 def seen_split(pred_rgb: np.ndarray, true_rgb: np.ndarray, seen: np.ndarray) -> SeenSplit:

@@ -38,13 +38,15 @@ def test_seen_split_pools_the_error_of_seen_and_unseen_pixels_over_views():
     a = seen_split(pred, true, seen)
     assert (a.seen_px, a.unseen_px) == (150, 50)
     assert a.unseen_sse == pytest.approx(50 * 0.01) and a.seen_sse == pytest.approx(50 * 1e-4)
-    unseen_px, unseen_err, psnr_seen = SeenSplit.pooled([a])
+    unseen_px, unseen_err, psnr_seen, psnr_all = SeenSplit.pooled([a])
     assert unseen_px == 0.25 and unseen_err == pytest.approx(0.5 / 0.505)
     assert psnr_seen == pytest.approx(-10 * np.log10(50 * 1e-4 / 150))
+    assert psnr_all == pytest.approx(psnr_db(pred, true)) and psnr_all < psnr_seen
     # a view that saw nothing adds its pixels to the unseen ones and nothing to the seen PSNR
     b = seen_split(pred, true, np.zeros((h, w), bool))
-    unseen_px, _, psnr_both = SeenSplit.pooled([a, b])
+    unseen_px, _, psnr_both, psnr_all_both = SeenSplit.pooled([a, b])
     assert unseen_px == pytest.approx(250 / 400) and psnr_both == pytest.approx(psnr_seen)
+    assert psnr_all_both == pytest.approx(psnr_all)                # the same image twice: the same MSE
     assert np.isnan(SeenSplit.pooled([b])[2]) and SeenSplit.pooled([seen_split(true, true, seen)])[2] == np.inf
     with pytest.raises(AssertionError):
         seen_split(pred, true, seen[:, :5])

@@ -392,13 +392,13 @@ def test_psnr_breakdown_splits_the_held_out_error_by_what_the_path_saw(finished,
     logs = [out / "runs" / p / "tiny-00-seed0.mcap" for p in ("baseline", "full")]
     assert mod.main([str(log) for log in logs]) == 0
     printed = capsys.readouterr().out.splitlines()
-    assert "| unseen px / err | PSNR seen px |" in printed[0] and len(printed) == 4
+    assert "| unseen px / err | PSNR seen / all px |" in printed[0] and len(printed) == 4
     from dynactivegs.eval.rendering import SeenSplit
     for log, line in zip(logs, printed[2:]):
         last = json.loads(log.with_suffix(".json").read_text())["checkpoints"][-1]
         _, rows = mod.run_breakdown(log, online=False)
         assert np.mean([r["psnr_db"] for r in rows]) == pytest.approx(last["psnr_db"], abs=1e-6)
-        unseen_px, unseen_err, seen_psnr = SeenSplit.pooled([r["seen"] for r in rows])
+        unseen_px, unseen_err, seen_psnr, _ = SeenSplit.pooled([r["seen"] for r in rows])
         assert 100 * unseen_px == pytest.approx(100.0 - last["observed_view_pct"], abs=2.0)
         assert 0.0 < unseen_px < 1.0 and 0.0 < unseen_err < 1.0 and np.isfinite(seen_psnr)
         assert line.startswith(f"| tiny-00 seed 0, {log.parent.name} | {last['psnr_db']:.2f} |")
