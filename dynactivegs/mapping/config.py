@@ -36,7 +36,9 @@ class MappingConfig:
     (apartment-03 seed 0: 2.74 cm / 92.1 % / 24.06 dB -> 2.42 / 93.0 / 24.26). Higher ratios gain more
     in the open loop but let people seed: on the scripted tour with the static vote off, 3 left 0.48 x
     the unweighted map's ghosts, 2 left 0.17 x. In closed loop (benchmarks/results/apartment-1000-seedgate,
-    12 pairs) 2 and 1.5 could not be told apart: full 2.96 / 90.0 / 23.15 against 3.14 / 89.9 / 23.24."""
+    12 pairs) 2 and 1.5 could not be told apart: full 2.96 / 90.0 / 23.15 against 3.14 / 89.9 / 23.24; 3 against 2
+    (benchmarks/results/apartment-1000-seedratio, 8 pairs): 3.37 / 90.5 / 23.75 against 2.77 / 91.6 / 23.19, the
+    PSNR from one pair's path and Acc worse in 6 of 8."""
     drop_beta_ratio: float = 0.0
     """With weighting on, pixels with beta above this times b_ref get weight 0 instead of (b_ref / beta)^2;
     0 (the default): never, the paper's weights as they are. See the mapping stage's docstring."""
