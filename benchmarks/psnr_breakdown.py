@@ -37,6 +37,7 @@ import argparse
 import dataclasses
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -82,8 +83,10 @@ def chosen_map(reader, last_map, online: bool, mcap: Path):
     return g
 
 
-def run_breakdown(mcap: Path, online: bool) -> tuple[str, list[dict[str, float]]]:
-    """(a label, one breakdown per held-out view) of the run logged in ``mcap``."""
+def run_breakdown(mcap: Path, online: bool) -> tuple[str, list[dict[str, Any]]]:
+    """(a label, one breakdown per held-out view) of the run logged in ``mcap``: the PSNR, the fields of its
+    :class:`~dynactivegs.eval.rendering.PsnrSplit`, and under ``seen`` its
+    :class:`~dynactivegs.eval.rendering.SeenSplit`."""
     import torch
 
     from dynactivegs.eval.metrics import SceneEvaluator
