@@ -148,13 +148,12 @@ def pixel_points(poses: np.ndarray, depths_m: np.ndarray, K: np.ndarray) -> tupl
     order of the points (``mask[mask] = seen`` puts a per-point result back on the pixels). An
     :class:`ObservedSurface` of these points, updated with a run's frames, says which pixels of the views show
     surface the run's camera saw: what :meth:`ObservedSurface.view_share` estimates from the probe points."""
+    from dynactivegs.eval.recon import backproject_depth      # torch-importing module: only when asked
+
     depths = np.asarray(depths_m, np.float64)
     assert depths.ndim == 3 and len(poses) == len(depths), "depths must be (V, H, W), one per pose"
-    _, h, w = depths.shape
-    v, u = np.mgrid[0:h, 0:w]
-    rays = np.stack([(u + 0.5 - K[0, 2]) / K[0, 0], (v + 0.5 - K[1, 2]) / K[1, 1], np.ones((h, w))], axis=-1)
     mask = depths > 0
-    points = [(rays[m] * d[m][:, None]) @ T[:3, :3].T + T[:3, 3] for T, d, m in zip(poses, depths, mask)]
+    points = [backproject_depth(d, m, K, T) for T, d, m in zip(poses, depths, mask)]
     return (np.concatenate(points) if points else np.zeros((0, 3))), mask
 
 

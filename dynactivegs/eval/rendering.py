@@ -37,6 +37,11 @@ def _image(rgb: np.ndarray | torch.Tensor) -> torch.Tensor:
     return t
 
 
+def _pixel_sq_err(pred_rgb: np.ndarray | torch.Tensor, true_rgb: np.ndarray | torch.Tensor) -> np.ndarray:
+    """float64 (H, W): each pixel's squared colour error, the mean over RGB, of the prediction clamped to [0, 1]."""
+    return ((_image(pred_rgb).clamp(0, 1) - _image(true_rgb)) ** 2).mean(-1).numpy()
+
+
 def psnr_db(pred_rgb: np.ndarray | torch.Tensor, true_rgb: np.ndarray | torch.Tensor) -> float:
     """PSNR in dB of two (H, W, 3) images (uint8 or float in [0, 1]); inf for identical images."""
     return psnr(_image(pred_rgb).clamp(0, 1), _image(true_rgb))
@@ -93,7 +98,7 @@ def psnr_split(pred_rgb: np.ndarray, pred_depth_m: np.ndarray, pred_alpha: np.nd
                true_depth_m: np.ndarray) -> PsnrSplit:
     """The :class:`PsnrSplit` of one view: rgb (H, W, 3) as for :func:`psnr_db`, depths (H, W) in m (true 0:
     no return), alpha (H, W) in [0, 1]."""
-    err = ((_image(pred_rgb).clamp(0, 1) - _image(true_rgb)) ** 2).mean(-1).numpy()
+    err = _pixel_sq_err(pred_rgb, true_rgb)
     pred_depth_m, true_depth_m = np.asarray(pred_depth_m), np.asarray(true_depth_m)
     assert err.shape == pred_depth_m.shape == true_depth_m.shape == np.shape(pred_alpha), "image sizes differ"
     hole = np.asarray(pred_alpha) < HOLE_ALPHA
@@ -140,7 +145,7 @@ class SeenSplit:
 
 def seen_split(pred_rgb: np.ndarray, true_rgb: np.ndarray, seen: np.ndarray) -> SeenSplit:
     """The :class:`SeenSplit` of one view: rgb (H, W, 3) as for :func:`psnr_db`, ``seen`` bool (H, W)."""
-    err = ((_image(pred_rgb).clamp(0, 1) - _image(true_rgb)) ** 2).mean(-1).numpy()
+    err = _pixel_sq_err(pred_rgb, true_rgb)
     seen = np.asarray(seen, bool)
     assert seen.shape == err.shape, f"seen must be (H, W) like the images; got {seen.shape}"
     return SeenSplit(int(seen.sum()), float(err[seen].sum()), int((~seen).sum()), float(err[~seen].sum()))
