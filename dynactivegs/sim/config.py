@@ -96,6 +96,10 @@ class CrowdConfig:
     """Crowd integration step; a simulator step is split into substeps of at most this length."""
     stuck_timeout_s: float = 3.0
     """A person whose remaining path stops shrinking for this long picks a new goal (breaks door jams)."""
+    stuck_speed_frac: float = 0.25
+    """Progress counts only at this fraction of the person's own speed or more: the remaining path must shrink
+    by ``stuck_speed_frac * speed * stuck_timeout_s`` within ``stuck_timeout_s``, else the person picks a new goal
+    (someone inching into a jam at a few cm/s gives up like someone standing still)."""
 
     def __post_init__(self) -> None:
         check_config(self.count >= -1, "crowd.count", self.count, ">= 0, or -1 for the area rule")
@@ -109,6 +113,7 @@ class CrowdConfig:
                  self.obstacle_time_horizon_s, "> 0")
         check_config(0.0 < self.substep_s <= 1.0, "crowd.substep_s", self.substep_s, "in (0, 1] s")
         check_config(self.stuck_timeout_s > 0, "crowd.stuck_timeout_s", self.stuck_timeout_s, "> 0")
+        check_config(0.0 <= self.stuck_speed_frac < 1.0, "crowd.stuck_speed_frac", self.stuck_speed_frac, "in [0, 1)")
 
 
 @dataclass(frozen=True, slots=True)

@@ -17,8 +17,9 @@ full-resolution navigable grid. Per substep:
    otherwise a move along only x or only y is tried, else the person stays put. Hence
    people never walk into walls, furniture, each other or the robot, whatever ORCA says.
 
-A person whose remaining path length does not shrink for ``cfg.stuck_timeout_s`` picks a
-new goal, planned on a graph from which the cells other people and the robot stand on are
+A person whose remaining path length does not shrink by ``cfg.stuck_speed_frac`` of what
+its speed covers in ``cfg.stuck_timeout_s`` within that time (standing in a jam, or inching
+into one) picks a new goal, planned on a graph from which the cells other people and the robot stand on are
 removed (so someone jammed at a door turns away from the jam); one whose waypoint stays
 out of sight for a second replans to the same goal.
 The gait phase advances by 2 pi per stride of walked distance (stride proportional to
@@ -46,7 +47,7 @@ from dynactivegs.sim.orca import ObstacleIndex, orca_velocities
 
 _PLAN_RES_M = 0.1             # target cell size of the path-planning graph
 _GOAL_TOL_M = 0.1             # a waypoint or the goal this close counts as reached
-_PROGRESS_M = 0.05            # shortening the remaining path by this much counts as progress
+_PROGRESS_M = 0.05            # shortening the remaining path by at least this much counts as progress
 _BLIND_REPLAN_S = 1.0         # waypoint out of sight this long -> replan to the same goal
 _HEADING_TAU_S = 0.25         # time constant of the heading filter
 _HEADING_RATE_RPS = math.pi   # the heading turns at most this fast
@@ -271,6 +272,7 @@ class Crowd:
         self._paths: list[np.ndarray] = [np.zeros((1, 2))] * p
         self._wp_index = np.zeros(p, np.int64)
         self._progress_d = np.full(p, np.inf)
+        self._progress_m = np.maximum(_PROGRESS_M, cfg.stuck_speed_frac * self._speed * cfg.stuck_timeout_s)
         self._progress_t = np.zeros(p)
         self._blind_s = np.zeros(p)
         self._goal_tree: list[tuple[int, np.ndarray] | None] = [None] * p
@@ -438,7 +440,7 @@ class Crowd:
         # bookkeeping: goals, progress (remaining path length), line of sight
         k = self._wp_start[:-1] + self._wp_index
         remaining = np.hypot(*(self._wp[k] - self._pos).T) + self._wp_rest[k]
-        progressed = remaining < self._progress_d - _PROGRESS_M
+        progressed = remaining < self._progress_d - self._progress_m
         self._progress_d = np.where(progressed, remaining, self._progress_d)
         self._progress_t = np.where(progressed, self._time_s, self._progress_t)
         self._blind_s = np.where(visible, 0.0, self._blind_s + h)

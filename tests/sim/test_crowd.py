@@ -184,6 +184,49 @@ def test_a_blocked_person_picks_a_new_goal():
     assert (crowd.positions_xy_m[0, 0] - robot[0]) * (start[0] - robot[0]) > 0, "the person went through the robot"
 
 
+def _follow_a_creeping_robot(frac: float) -> tuple[float | None, float]:
+    """A person walks up behind the robot, which creeps along a 1 m corridor toward the person's goal at 5 cm/s
+    for 30 s: (seconds from catching up with the robot to giving up the first goal, None if it kept it; how far
+    back, in metres, the person went from where it caught up)."""
+    fs = FreeSpace.from_grid(_walled(10.0, 1.0), RES)
+    cfg = CrowdConfig(count=1, min_goal_dist_m=5.0, stuck_speed_frac=frac)
+    robot = np.array([3.0, 0.55])
+    for seed in range(40):
+        crowd = Crowd(cfg, fs, np.random.default_rng(seed), robot, ROBOT_R)
+        start, goal = crowd.positions_xy_m[0], crowd.goals_xy_m[0]
+        if start[0] < 2.5 and goal[0] > 6.5:
+            break                                     # the robot stays between the person and its goal
+    else:
+        pytest.fail("no seed put the person left of the robot with a goal far right of it")
+    first_goal, caught_up, gave_up, back_m = goal.copy(), None, None, 0.0
+    for k in range(60):
+        moved = robot + np.array([0.025, 0.0])
+        crowd.step(0.5, moved, (moved - robot) / 0.5, ROBOT_R)
+        robot = moved
+        x = crowd.positions_xy_m[0, 0]
+        gap = np.hypot(*(crowd.positions_xy_m[0] - robot)) - 0.3 - ROBOT_R
+        assert gap >= 0.0, f"the person came {-gap:.3f} m into the robot"
+        if caught_up is None and gap < 0.05:
+            caught_up = (k, x)
+        if caught_up is not None:
+            back_m = max(back_m, caught_up[1] - x)
+            if gave_up is None and not np.array_equal(crowd.goals_xy_m[0], first_goal):
+                gave_up = 0.5 * (k - caught_up[0])
+    assert caught_up is not None, "the person never caught up with the robot"
+    return gave_up, back_m
+
+
+def test_a_person_inching_behind_the_robot_picks_a_new_goal():
+    """Progress counts only at stuck_speed_frac of the person's speed: following the robot at 5 cm/s (a tenth of
+    walking speed) is being stuck, so the person soon gives up its goal and walks back; counting any shortening of
+    its path as progress (stuck_speed_frac 0), it follows the robot for the whole 30 s."""
+    gave_up, back_m = _follow_a_creeping_robot(0.25)
+    assert gave_up is not None and gave_up <= 3.0 + 2.0, f"the person inched behind the robot until {gave_up} s"
+    assert back_m > 1.0, f"the person went only {back_m:.2f} m back from the robot"
+    gave_up, back_m = _follow_a_creeping_robot(0.0)
+    assert gave_up is None and back_m < 0.1, "with stuck_speed_frac 0 the person should follow the robot"
+
+
 def test_gait_phase_follows_distance_and_heading_turns_smoothly():
     fs = pillar_room()
     crowd = Crowd(CrowdConfig(count=5), fs, np.random.default_rng(2), np.array([1.0, 1.0]), ROBOT_R)
