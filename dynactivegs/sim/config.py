@@ -95,7 +95,8 @@ class CrowdConfig:
     substep_s: float = 0.1
     """Crowd integration step; a simulator step is split into substeps of at most this length."""
     stuck_timeout_s: float = 3.0
-    """A person whose remaining path stops shrinking for this long picks a new goal (breaks door jams)."""
+    """A person whose remaining path stops shrinking (see ``stuck_speed_frac``) for this long picks a new goal
+    (breaks door jams)."""
     stuck_speed_frac: float = 0.25
     """Progress counts only at this fraction of the person's own speed or more: the remaining path must shrink
     by ``stuck_speed_frac * speed * stuck_timeout_s`` within ``stuck_timeout_s``, else the person picks a new goal

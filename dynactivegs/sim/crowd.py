@@ -19,9 +19,9 @@ full-resolution navigable grid. Per substep:
 
 A person whose remaining path length does not shrink by ``cfg.stuck_speed_frac`` of what
 its speed covers in ``cfg.stuck_timeout_s`` within that time (standing in a jam, or inching
-into one) picks a new goal, planned on a graph from which the cells other people and the robot stand on are
-removed (so someone jammed at a door turns away from the jam); one whose waypoint stays
-out of sight for a second replans to the same goal.
+into one) picks a new goal, planned on a graph from which the cells other people and the
+robot stand on are removed (so someone jammed at a door turns away from the jam); one whose
+waypoint stays out of sight for a second replans to the same goal.
 The gait phase advances by 2 pi per stride of walked distance (stride proportional to
 height) and the heading turns smoothly toward the walking direction.
 
