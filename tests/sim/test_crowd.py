@@ -161,20 +161,25 @@ def test_people_pass_each_other_in_a_corridor():
     assert (crowd.goals_reached >= 3).all(), f"goals reached along the corridor: {crowd.goals_reached}"
 
 
+def _one_person(cfg: CrowdConfig, fs: FreeSpace, robot: np.ndarray, seeds: int, wanted, why: str) -> Crowd:
+    """The crowd of one person from the first of ``seeds`` seeds whose start and first goal pass
+    ``wanted(start, goal)``; the test fails with ``why`` when none does."""
+    for seed in range(seeds):
+        crowd = Crowd(cfg, fs, np.random.default_rng(seed), robot, ROBOT_R)
+        if wanted(crowd.positions_xy_m[0], crowd.goals_xy_m[0]):
+            return crowd
+    pytest.fail(why)
+
+
 def test_a_blocked_person_picks_a_new_goal():
     """The robot parks in a 1 m corridor; whoever wants past it gives up after stuck_timeout_s."""
     occ = _walled(8.0, 1.0)
     fs = FreeSpace.from_grid(occ, RES)
     robot = np.array([4.0, 0.55])
     cfg = CrowdConfig(count=1, min_goal_dist_m=5.0, stuck_timeout_s=4.0)
-    for seed in range(20):
-        crowd = Crowd(cfg, fs, np.random.default_rng(seed), robot, ROBOT_R)
-        start, goal = crowd.positions_xy_m[0], crowd.goals_xy_m[0]
-        if (start[0] - robot[0]) * (goal[0] - robot[0]) < 0:
-            break                                     # a person on one side with a goal on the other
-    else:
-        pytest.fail("no seed put the person and its goal on opposite sides of the robot")
-    first_goal = goal.copy()
+    crowd = _one_person(cfg, fs, robot, 20, lambda start, goal: (start[0] - robot[0]) * (goal[0] - robot[0]) < 0,
+                        "no seed put the person and its goal on opposite sides of the robot")
+    start, first_goal = crowd.positions_xy_m[0], crowd.goals_xy_m[0]
     for _ in range(60):
         crowd.step(0.5, robot, np.zeros(2), ROBOT_R)
         gap = np.hypot(*(crowd.positions_xy_m[0] - robot)) - 0.3 - ROBOT_R
@@ -191,14 +196,10 @@ def _follow_a_creeping_robot(frac: float) -> tuple[float | None, float]:
     fs = FreeSpace.from_grid(_walled(10.0, 1.0), RES)
     cfg = CrowdConfig(count=1, min_goal_dist_m=5.0, stuck_speed_frac=frac)
     robot = np.array([3.0, 0.55])
-    for seed in range(40):
-        crowd = Crowd(cfg, fs, np.random.default_rng(seed), robot, ROBOT_R)
-        start, goal = crowd.positions_xy_m[0], crowd.goals_xy_m[0]
-        if start[0] < 2.5 and goal[0] > 6.5:
-            break                                     # the robot stays between the person and its goal
-    else:
-        pytest.fail("no seed put the person left of the robot with a goal far right of it")
-    first_goal, caught_up, gave_up, back_m = goal.copy(), None, None, 0.0
+    # the robot stays between the person and its goal for the whole 30 s
+    crowd = _one_person(cfg, fs, robot, 40, lambda start, goal: start[0] < 2.5 and goal[0] > 6.5,
+                        "no seed put the person left of the robot with a goal far right of it")
+    first_goal, caught_up, gave_up, back_m = crowd.goals_xy_m[0], None, None, 0.0
     for k in range(60):
         moved = robot + np.array([0.025, 0.0])
         crowd.step(0.5, moved, (moved - robot) / 0.5, ROBOT_R)
