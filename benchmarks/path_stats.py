@@ -13,6 +13,11 @@ truth and prints one Markdown row:
   ones: **reached**, **given up** (unreachable, stuck or timed out), and the steps per reached target;
 - **actions**: forward / turn / stop steps, the steps the local collision check blocked, and the
   steps whose move the simulator stopped (collisions);
+- **blocked episodes**: how many times the robot was held up: runs of blocked steps, two runs merged when
+  at most ``EPISODE_GAP`` steps lie between them (a robot waiting for someone turns between tries), so
+  blocked / episodes is how long a hold-up lasted and episodes how often one began;
+- **people near**: the mean number of people within ``NEAR_M`` of the robot per step (the simulator's
+  truth): how much of the crowd the path went through;
 - **people px %**: the share of the camera's pixels that saw a person, over all steps (what the
   camera spent on what the map must not keep).
 
@@ -47,12 +52,23 @@ from psnr_breakdown import logged_config  # noqa: E402  (the same reading of a r
 
 GIVE_UP = ("unreachable", "stuck", "timeout")
 COLUMNS = ("run", "path m", "cells", "targets local / global", "reached", "given up", "steps per reached",
-           "forward / turn / stop", "blocked", "collisions", "people px %")
+           "forward / turn / stop", "blocked", "blocked episodes", "collisions", "people near", "people px %")
+EPISODE_GAP = 5
+"""Two runs of blocked steps with at most this many other steps between them are one episode."""
+NEAR_M = 1.5
+"""People within this distance (m) of the robot count as near it."""
+
+
+def blocked_episodes(blocked: np.ndarray, gap: int = EPISODE_GAP) -> int:
+    """The number of episodes in the per-step ``blocked`` flags: runs of blocked steps, merged when at most
+    ``gap`` unblocked steps lie between two."""
+    idx = np.flatnonzero(blocked)
+    return int(len(idx) > 0) + int((np.diff(idx) > gap + 1).sum())
 
 
 def path_stats(mcap: Path, cell_m: float, observed: Any = None, evaluator: Any = None
-               ) -> tuple[str, dict[str, float]]:
-    """(a label, the numbers of the module docstring) of one run log; with ``observed`` (an
+               ) -> tuple[str, str, dict[str, float]]:
+    """(a label, the scene, the numbers of the module docstring) of one run log; with ``observed`` (an
     :class:`~dynactivegs.eval.progress.ObservedSurface`, updated with every logged frame) also its
     ``observed_pct``, and with ``evaluator`` too (the scene's
     :class:`~dynactivegs.eval.metrics.SceneEvaluator`) its ``observed_view_pct``."""
@@ -63,7 +79,7 @@ def path_stats(mcap: Path, cell_m: float, observed: Any = None, evaluator: Any =
     reader = LogReader(mcap)
     cfg = logged_config(reader, mcap)
     xy, truth_xy, people, reasons, modes = [], [], [], collections.Counter(), collections.Counter()
-    actions, blocked, collisions = collections.Counter(), 0, 0
+    actions, blocked, collisions, near = collections.Counter(), [], 0, []
     for st in reader.steps():
         frame = st["/frame"]
         if observed is not None:
@@ -73,6 +89,7 @@ def path_stats(mcap: Path, cell_m: float, observed: Any = None, evaluator: Any =
         truth = st["/truth"]
         truth_xy.append((truth.robot.x_m, truth.robot.y_m))
         people.append(float(truth.people_mask.mean()))
+        near.append(int((np.hypot(*(np.asarray(truth.people_xy_m).reshape(-1, 2) - truth_xy[-1]).T) < NEAR_M).sum()))
         collisions += bool(truth.collided)
         sel, plan = st.get("/selection"), st.get("/planning")
         if sel is not None:
@@ -81,7 +98,7 @@ def path_stats(mcap: Path, cell_m: float, observed: Any = None, evaluator: Any =
                 modes[sel.mode] += 1
         if plan is not None:
             actions[Action(plan.action)] += 1
-            blocked += bool(plan.blocked)
+        blocked.append(plan is not None and bool(plan.blocked))
     if not xy:
         raise ValueError(f"{mcap}: the log holds no whole step; pass the .mcap of a run that took at least one")
     pos = np.asarray(xy)
@@ -94,14 +111,14 @@ def path_stats(mcap: Path, cell_m: float, observed: Any = None, evaluator: Any =
         "reached": reached, "given_up": sum(reasons[k] for k in GIVE_UP),
         "steps_per_reached": len(pos) / reached if reached else float("nan"),
         "forward": actions[Action.FORWARD], "turn": actions[Action.TURN_LEFT] + actions[Action.TURN_RIGHT],
-        "stop": actions[Action.STOP], "blocked": blocked, "collisions": collisions,
-        "people_pct": 100.0 * float(np.mean(people)),
+        "stop": actions[Action.STOP], "blocked": int(np.sum(blocked)), "episodes": blocked_episodes(np.array(blocked)),
+        "collisions": collisions, "people_near": float(np.mean(near)), "people_pct": 100.0 * float(np.mean(people)),
     }
     if observed is not None:
         out["observed_pct"] = observed.pct
         if evaluator is not None:
             out["observed_view_pct"] = evaluator.observed_view_pct(observed, np.asarray(truth_xy))
-    return f"{reader.metadata.get('preset', '?')} {cfg.sim.scene} seed {cfg.seed}", out
+    return f"{reader.metadata.get('preset', '?')} {cfg.sim.scene} seed {cfg.seed}", cfg.sim.scene, out
 
 
 def run_metrics(mcap: Path) -> tuple[float, float, float | None, float | None, Any, Any]:
@@ -163,7 +180,7 @@ def within_scene_correlations(runs: list[tuple[str, dict[str, float], float]]
 def row(label: str, s: dict[str, float]) -> str:
     return (f"| {label} | {s['path_m']:.1f} | {s['cells']} | {s['local']} / {s['global']} | {s['reached']} | "
             f"{s['given_up']} | {s['steps_per_reached']:.0f} | {s['forward']} / {s['turn']} / {s['stop']} | "
-            f"{s['blocked']} | {s['collisions']} | {s['people_pct']:.1f} |")
+            f"{s['blocked']} | {s['episodes']} | {s['collisions']} | {s['people_near']:.2f} | {s['people_pct']:.1f} |")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -183,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
     for path in args.mcap:
         try:
             metrics = run_metrics(path) if args.metrics else None
-            label, stats = path_stats(path, args.cell, *(metrics[4:] if metrics else ()))
+            label, scene, stats = path_stats(path, args.cell, *(metrics[4:] if metrics else ()))
         except (DagsError, ValueError) as e:
             sys.exit(f"error: {e}")
         line = row(label, stats)
@@ -192,7 +209,7 @@ def main(argv: list[str] | None = None) -> int:
                 stats.update(observed_pct=metrics[2], observed_view_pct=metrics[3])
             line += (f" {metrics[0]:.1f} | {metrics[1]:.2f} | {stats['observed_pct']:.1f} |"
                      f" {stats['observed_view_pct']:.1f} |")
-            runs.append((label.split(" ")[1], stats, metrics[1]))
+            runs.append((scene, stats, metrics[1]))
         print(line, flush=True)
     if args.metrics:
         corr = within_scene_correlations(runs)

@@ -309,7 +309,8 @@ def test_occupancy_errors_counts_a_false_obstacle_and_a_cleared_wall():
 
 def test_path_stats_counts_the_logged_path(finished, capsys, tmp_path):
     """benchmarks/path_stats.py on the sweep's two runs: one action per step, the collisions dagsbench counted,
-    the robot's distance driven and cells from its logged poses; a missing log is one line."""
+    the robot's distance driven and cells from its logged poses, the people near it from the logged truth; a
+    missing log is one line."""
     from dynactivegs.records import robot_pose_of
     from replay.source import LogReader
 
@@ -317,14 +318,19 @@ def test_path_stats_counts_the_logged_path(finished, capsys, tmp_path):
     mod = _benchmark_module("path_stats")
     for p in ("baseline", "full"):
         log = out / "runs" / p / "tiny-00-seed0.mcap"
-        label, s = mod.path_stats(log, 0.5)
-        assert label == f"{p} tiny-00 seed 0" and s["steps"] == 6
+        label, scene, s = mod.path_stats(log, 0.5)
+        assert label == f"{p} tiny-00 seed 0" and scene == "tiny-00" and s["steps"] == 6
         assert s["forward"] + s["turn"] + s["stop"] == 6
         assert s["collisions"] == json.loads((out / "runs" / p / "tiny-00-seed0.json").read_text())["collisions"]
         xy = np.array([(q.x_m, q.y_m) for q in (robot_pose_of(st["/frame"]) for st in LogReader(log).steps())])
         assert s["path_m"] == pytest.approx(np.hypot(*np.diff(xy, axis=0).T).sum())
         assert s["cells"] == len({tuple(c) for c in np.floor(xy / 0.5).astype(int)}) >= 1
         assert s["local"] + s["global"] >= 1 and 0.0 <= s["people_pct"] <= 100.0
+        steps = list(LogReader(log).steps())
+        near = [np.sum(np.hypot(*(st["/truth"].people_xy_m - [st["/truth"].robot.x_m, st["/truth"].robot.y_m]).T)
+                       < mod.NEAR_M) for st in steps]
+        assert s["people_near"] == pytest.approx(np.mean(near))
+        assert s["blocked"] == sum(bool(st["/planning"].blocked) for st in steps) and s["episodes"] <= s["blocked"]
     assert mod.main([str(out / "runs" / "full" / "tiny-00-seed0.mcap")]) == 0
     printed = capsys.readouterr().out.splitlines()
     assert printed[0].startswith("| run | path m") and printed[2].startswith("| full tiny-00 seed 0 |")
@@ -349,7 +355,7 @@ def test_path_stats_counts_the_logged_path(finished, capsys, tmp_path):
     (old / "tiny-00-seed0.json").write_text(json.dumps(done))
     cr, psnr, seen, views, observed, evaluator = mod.run_metrics(old / "tiny-00-seed0.mcap")
     assert (cr, psnr, seen, views) == (last["cr_pct"], last["psnr_db"], None, None)
-    measured = mod.path_stats(old / "tiny-00-seed0.mcap", 0.5, observed, evaluator)[1]
+    measured = mod.path_stats(old / "tiny-00-seed0.mcap", 0.5, observed, evaluator)[2]
     assert measured["observed_pct"] == last["observed_pct"]
     assert measured["observed_view_pct"] == pytest.approx(last["observed_view_pct"], abs=1e-9)
 
@@ -404,6 +410,17 @@ def test_psnr_breakdown_splits_the_held_out_error_by_what_the_path_saw(finished,
         assert line.startswith(f"| tiny-00 seed 0, {log.parent.name} | {last['psnr_db']:.2f} |")
     with pytest.raises(SystemExit, match="error: .*missing.mcap"):
         mod.main([str(out / "missing.mcap")])
+
+
+def test_path_stats_counts_a_wait_with_turns_between_tries_as_one_episode():
+    """Blocked steps a few turns apart are one hold-up; a longer gap starts another."""
+    mod = _benchmark_module("path_stats")
+    flags = np.zeros(30, bool)
+    flags[[2, 3, 6, 12]] = True                 # 2 and 3 steps between: one episode with gap 5
+    flags[[19, 20, 29]] = True                  # 6 steps after 12, 8 after 20: two more (5 runs in all)
+    assert mod.blocked_episodes(flags) == 3
+    assert mod.blocked_episodes(flags, gap=0) == 5 and mod.blocked_episodes(flags, gap=10) == 1
+    assert mod.blocked_episodes(np.zeros(5, bool)) == 0
 
 
 def test_path_stats_correlates_path_traits_with_psnr_within_each_scene(tmp_path):
