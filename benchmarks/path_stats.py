@@ -89,7 +89,7 @@ def path_stats(mcap: Path, cell_m: float, observed: Any = None, evaluator: Any =
         truth = st["/truth"]
         truth_xy.append((truth.robot.x_m, truth.robot.y_m))
         people.append(float(truth.people_mask.mean()))
-        near.append(int((np.hypot(*(np.asarray(truth.people_xy_m).reshape(-1, 2) - truth_xy[-1]).T) < NEAR_M).sum()))
+        near.append(int((np.hypot(*(truth.people_xy_m - truth_xy[-1]).T) < NEAR_M).sum()))   # (P, 2), P may be 0
         collisions += bool(truth.collided)
         sel, plan = st.get("/selection"), st.get("/planning")
         if sel is not None:
