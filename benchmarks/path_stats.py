@@ -16,6 +16,11 @@ truth and prints one Markdown row:
 - **blocked episodes**: how many times the robot was held up: runs of blocked steps, two runs merged when
   at most ``EPISODE_GAP`` steps lie between them (a robot waiting for someone turns between tries), so
   blocked / episodes is how long a hold-up lasted and episodes how often one began;
+- **detour %**: the share of steps the robot followed a path longer (by more than ``DETOUR_TOL``) than
+  the shortest graph path between the same two nodes: where the planner's motion term (eq. 11) or a blocked
+  spot's penalty made it go round; **loops**: the mean number of independent cycles (edges - nodes +
+  components) of the selection's graph over the steps, how many ways round anything the graph offers (a
+  tree offers none, and then every edge cost gives the same path);
 - **people near**: the mean number of people within ``NEAR_M`` of the robot per step (the simulator's
   truth): how much of the crowd the path went through;
 - **people px %**: the share of the camera's pixels that saw a person, over all steps (what the
@@ -52,11 +57,14 @@ from psnr_breakdown import logged_config  # noqa: E402  (the same reading of a r
 
 GIVE_UP = ("unreachable", "stuck", "timeout")
 COLUMNS = ("run", "path m", "cells", "targets local / global", "reached", "given up", "steps per reached",
-           "forward / turn / stop", "blocked", "blocked episodes", "collisions", "people near", "people px %")
+           "forward / turn / stop", "blocked", "blocked episodes", "collisions", "detour %", "loops", "people near",
+           "people px %")
 EPISODE_GAP = 5
 """Two runs of blocked steps with at most this many other steps between them are one episode."""
 NEAR_M = 1.5
 """People within this distance (m) of the robot count as near it."""
+DETOUR_TOL = 0.05
+"""A held path more than this fraction longer than the shortest graph path between its end nodes is a detour."""
 
 
 def blocked_episodes(blocked: np.ndarray, gap: int = EPISODE_GAP) -> int:
@@ -64,6 +72,45 @@ def blocked_episodes(blocked: np.ndarray, gap: int = EPISODE_GAP) -> int:
     ``gap`` unblocked steps lie between two."""
     idx = np.flatnonzero(blocked)
     return int(len(idx) > 0) + int((np.diff(idx) > gap + 1).sum())
+
+
+def _length_matrix(n_nodes: int, edges: np.ndarray, length_m: np.ndarray):
+    from scipy import sparse
+
+    return sparse.csr_matrix((np.r_[length_m, length_m], (np.r_[edges[:, 0], edges[:, 1]],
+                                                          np.r_[edges[:, 1], edges[:, 0]])), shape=(n_nodes, n_nodes))
+
+
+def cycle_rank(n_nodes: int, edges: np.ndarray) -> int:
+    """Independent cycles of an undirected graph with ``n_nodes`` nodes and ``edges`` (E, 2): E - N + components."""
+    from scipy.sparse.csgraph import connected_components
+
+    if n_nodes == 0:
+        return 0
+    n_comp = connected_components(_length_matrix(n_nodes, edges, np.ones(len(edges))), directed=False)[0]
+    return int(len(edges) - n_nodes + n_comp)
+
+
+def detour_ratio(node_xy: np.ndarray, edges: np.ndarray, length_m: np.ndarray, path_xy: np.ndarray) -> float:
+    """How much longer a planned path's node chain is than the shortest graph path between its end nodes
+    (1 = the shortest). ``path_xy`` (P, 2) is a :class:`~dynactivegs.records.PlanningOut` path: the robot, then
+    graph node positions, then the target; the points that are nodes (within 1 mm) make the chain, each link
+    measured by its edge's ``length_m`` (straight, when two are not joined by an edge). 1 when fewer than two
+    of them are nodes."""
+    from scipy.sparse.csgraph import dijkstra
+
+    if len(node_xy) == 0 or len(path_xy) < 2:
+        return 1.0
+    d = np.hypot(*(node_xy[None, :, :] - path_xy[:, None, :]).transpose(2, 0, 1))        # (P, N)
+    chain = [int(k) for k, ok in zip(d.argmin(axis=1), d.min(axis=1) < 1e-3) if ok]
+    chain = [k for i, k in enumerate(chain) if i == 0 or k != chain[i - 1]]
+    if len(chain) < 2:
+        return 1.0
+    lengths = _length_matrix(len(node_xy), edges, length_m)
+    held = sum(float(lengths[a, b]) or float(np.hypot(*(node_xy[a] - node_xy[b])))
+               for a, b in zip(chain[:-1], chain[1:]))
+    best = float(dijkstra(lengths, directed=False, indices=chain[0])[chain[-1]])
+    return held / best if best > 0 else 1.0
 
 
 def path_stats(mcap: Path, cell_m: float, observed: Any = None, evaluator: Any = None
@@ -80,6 +127,7 @@ def path_stats(mcap: Path, cell_m: float, observed: Any = None, evaluator: Any =
     cfg = logged_config(reader, mcap)
     xy, truth_xy, people, reasons, modes = [], [], [], collections.Counter(), collections.Counter()
     actions, blocked, collisions, near = collections.Counter(), [], 0, []
+    detour, loops, sel_now, ratio = [], [], None, 1.0
     for st in reader.steps():
         frame = st["/frame"]
         if observed is not None:
@@ -93,11 +141,16 @@ def path_stats(mcap: Path, cell_m: float, observed: Any = None, evaluator: Any =
         collisions += bool(truth.collided)
         sel, plan = st.get("/selection"), st.get("/planning")
         if sel is not None:
+            sel_now = sel
+            loops.append(cycle_rank(len(sel.node_xy_m), sel.edges))
             reasons[sel.target_reason] += 1
             if sel.target_reason != "keep" and sel.mode in ("local", "global"):
                 modes[sel.mode] += 1
         if plan is not None:
             actions[Action(plan.action)] += 1
+            if plan.replanned and sel_now is not None:
+                ratio = detour_ratio(sel_now.node_xy_m, sel_now.edges, sel_now.edge_length_m, plan.path_xy_m)
+            detour.append(ratio > 1.0 + DETOUR_TOL)
         blocked.append(plan is not None and bool(plan.blocked))
     if not xy:
         raise ValueError(f"{mcap}: the log holds no whole step; pass the .mcap of a run that took at least one")
@@ -112,7 +165,8 @@ def path_stats(mcap: Path, cell_m: float, observed: Any = None, evaluator: Any =
         "steps_per_reached": len(pos) / reached if reached else float("nan"),
         "forward": actions[Action.FORWARD], "turn": actions[Action.TURN_LEFT] + actions[Action.TURN_RIGHT],
         "stop": actions[Action.STOP], "blocked": int(np.sum(blocked)), "episodes": blocked_episodes(np.array(blocked)),
-        "collisions": collisions, "people_near": float(np.mean(near)), "people_pct": 100.0 * float(np.mean(people)),
+        "collisions": collisions, "detour_pct": 100.0 * float(np.mean(detour)) if detour else 0.0,
+        "loops": float(np.mean(loops)) if loops else 0.0, "people_near": float(np.mean(near)), "people_pct": 100.0 * float(np.mean(people)),
     }
     if observed is not None:
         out["observed_pct"] = observed.pct
@@ -180,7 +234,7 @@ def within_scene_correlations(runs: list[tuple[str, dict[str, float], float]]
 def row(label: str, s: dict[str, float]) -> str:
     return (f"| {label} | {s['path_m']:.1f} | {s['cells']} | {s['local']} / {s['global']} | {s['reached']} | "
             f"{s['given_up']} | {s['steps_per_reached']:.0f} | {s['forward']} / {s['turn']} / {s['stop']} | "
-            f"{s['blocked']} | {s['episodes']} | {s['collisions']} | {s['people_near']:.2f} | {s['people_pct']:.1f} |")
+            f"{s['blocked']} | {s['episodes']} | {s['collisions']} | {s['detour_pct']:.1f} | {s['loops']:.1f} | {s['people_near']:.2f} | {s['people_pct']:.1f} |")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -331,6 +331,7 @@ def test_path_stats_counts_the_logged_path(finished, capsys, tmp_path):
                        < mod.NEAR_M) for st in steps]
         assert s["people_near"] == pytest.approx(np.mean(near))
         assert s["blocked"] == sum(bool(st["/planning"].blocked) for st in steps) and s["episodes"] <= s["blocked"]
+        assert 0.0 <= s["detour_pct"] <= 100.0 and s["loops"] >= 0.0
     assert mod.main([str(out / "runs" / "full" / "tiny-00-seed0.mcap")]) == 0
     printed = capsys.readouterr().out.splitlines()
     assert printed[0].startswith("| run | path m") and printed[2].startswith("| full tiny-00 seed 0 |")
@@ -421,6 +422,23 @@ def test_path_stats_counts_a_wait_with_turns_between_tries_as_one_episode():
     assert mod.blocked_episodes(flags) == 3
     assert mod.blocked_episodes(flags, gap=0) == 5 and mod.blocked_episodes(flags, gap=10) == 1
     assert mod.blocked_episodes(np.zeros(5, bool)) == 0
+
+
+def test_path_stats_finds_detours_and_counts_the_graphs_loops():
+    """A path round the long side of a loop is a detour by its length over the short side's; a path on a tree,
+    or one with fewer than two nodes on it, is not; a square with a tail has one loop, two trees none."""
+    mod = _benchmark_module("path_stats")
+    node_xy = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0], [2.0, 0.0]])
+    edges = np.array([[0, 1], [1, 2], [2, 3], [0, 3], [1, 4]])
+    length = np.array([1.0, 1.0, 1.0, 1.0, 1.0])
+    robot, target = np.array([[-0.3, 0.1]]), np.array([[1.0, 0.05]])
+    short = np.concatenate([robot, node_xy[[0, 1]], target])
+    long = np.concatenate([robot, node_xy[[0, 3, 2, 1]], target])
+    assert mod.detour_ratio(node_xy, edges, length, short) == pytest.approx(1.0)
+    assert mod.detour_ratio(node_xy, edges, length, long) == pytest.approx(3.0)
+    assert mod.detour_ratio(node_xy, edges, length, np.concatenate([robot, target])) == 1.0
+    assert mod.cycle_rank(5, edges) == 1
+    assert mod.cycle_rank(5, edges[[0, 1, 4]]) == 0 and mod.cycle_rank(0, edges[:0]) == 0    # two components
 
 
 def test_path_stats_correlates_path_traits_with_psnr_within_each_scene(tmp_path):
