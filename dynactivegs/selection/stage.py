@@ -128,7 +128,10 @@ class SelectionConfig:
     apartment scenes, one machine (benchmarks/results/apartment-1000-selection, Acc cm / C.R. % / PSNR dB, mean
     of 4, off -> on): 3.20 / 91.6 / 23.76 -> 3.30 / 90.5 / 23.38, PSNR lower on all 4 (by 0.16-0.60 dB), though
     the robot reached 28-41 targets per run (16 and 19 off, on apartment-01 and -03) and chose 34-43 of them
-    locally. How near and how many the targets are does not make full's PSNR: off."""
+    locally. How near and how many the targets are does not make full's PSNR: off. Again at the crowd rule of
+    benchmarks/results/apartment-1000-crowd (full_global_beats_local: apartment-00 and -01, seeds 0-1, mean of 4,
+    on -> off): blocked steps 115 -> 138 per run, targets reached 24 -> 17, 2.93 / 92.6 / 24.38 -> 2.47 / 92.8 /
+    24.64; fewer hold-ups, no better map."""
     boundary_gain: bool = False
     """Scored variants: eq. (8) sums U_s only over the voxels next to the known free space (6-neighbours of a
     voxel observed, n_obs > 0, that holds no occluder) and not in it: the faces of what bounds the seen free
