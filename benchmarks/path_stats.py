@@ -77,8 +77,8 @@ def blocked_episodes(blocked: np.ndarray, gap: int = EPISODE_GAP) -> int:
 def _length_matrix(n_nodes: int, edges: np.ndarray, length_m: np.ndarray):
     from scipy import sparse
 
-    return sparse.csr_matrix((np.r_[length_m, length_m], (np.r_[edges[:, 0], edges[:, 1]],
-                                                          np.r_[edges[:, 1], edges[:, 0]])), shape=(n_nodes, n_nodes))
+    rows, cols = np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]]
+    return sparse.csr_matrix((np.r_[length_m, length_m], (rows, cols)), shape=(n_nodes, n_nodes))
 
 
 def cycle_rank(n_nodes: int, edges: np.ndarray) -> int:
@@ -166,7 +166,8 @@ def path_stats(mcap: Path, cell_m: float, observed: Any = None, evaluator: Any =
         "forward": actions[Action.FORWARD], "turn": actions[Action.TURN_LEFT] + actions[Action.TURN_RIGHT],
         "stop": actions[Action.STOP], "blocked": int(np.sum(blocked)), "episodes": blocked_episodes(np.array(blocked)),
         "collisions": collisions, "detour_pct": 100.0 * float(np.mean(detour)) if detour else 0.0,
-        "loops": float(np.mean(loops)) if loops else 0.0, "people_near": float(np.mean(near)), "people_pct": 100.0 * float(np.mean(people)),
+        "loops": float(np.mean(loops)) if loops else 0.0, "people_near": float(np.mean(near)),
+        "people_pct": 100.0 * float(np.mean(people)),
     }
     if observed is not None:
         out["observed_pct"] = observed.pct
@@ -234,7 +235,8 @@ def within_scene_correlations(runs: list[tuple[str, dict[str, float], float]]
 def row(label: str, s: dict[str, float]) -> str:
     return (f"| {label} | {s['path_m']:.1f} | {s['cells']} | {s['local']} / {s['global']} | {s['reached']} | "
             f"{s['given_up']} | {s['steps_per_reached']:.0f} | {s['forward']} / {s['turn']} / {s['stop']} | "
-            f"{s['blocked']} | {s['episodes']} | {s['collisions']} | {s['detour_pct']:.1f} | {s['loops']:.1f} | {s['people_near']:.2f} | {s['people_pct']:.1f} |")
+            f"{s['blocked']} | {s['episodes']} | {s['collisions']} | {s['detour_pct']:.1f} | {s['loops']:.1f} | "
+            f"{s['people_near']:.2f} | {s['people_pct']:.1f} |")
 
 
 def main(argv: list[str] | None = None) -> int:

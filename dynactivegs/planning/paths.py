@@ -39,11 +39,11 @@ class PathConfig:
     variant: PlannerVariant = "dyn_edge_temporal"
     """Which edge cost: shortest (length only), dyn_edge (eq. 11, current U_m) or dyn_edge_temporal (eq. 11, EMA of eq. 13).
     The cost can only change the path where the graph offers another way round. On the apartment scenes it
-    rarely does: the selection's graph has 0.7-0.9 independent cycles on the mean over a 1000-step run (at most
-    1.9), and over the 12 runs of each preset in benchmarks/results/apartment-1000-crowd (path_stats.md, columns
-    detour % and loops) full's path was more than 5 % longer than the shortest on 1.3 % of its steps (8.7 % in
-    its most), weighted's and baseline's, with the shortest cost (their detours from blocked spots' penalties),
-    on 0.5 %."""
+    rarely does: over the 12 runs of each of baseline, weighted, motion_view and full in
+    benchmarks/results/apartment-1000-crowd (path_stats.md, columns detour % and loops) the selection's graph
+    had 0.65-0.86 independent cycles on the mean over a 1000-step run, per preset (at most 1.9 in a run), and
+    full's path was more than 5 % longer than the shortest on 1.3 % of its steps (8.7 % in one run), the
+    shortest-cost presets' (their detours from blocked spots' penalties) on 0.5-0.8 %."""
     motion_weight: float = 4.0
     """l_m of eq. (11): metres of detour worth one unit of mean motion uncertainty along an edge."""
     ema_gamma: float = 0.2
