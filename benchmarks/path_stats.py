@@ -74,20 +74,17 @@ def blocked_episodes(blocked: np.ndarray, gap: int = EPISODE_GAP) -> int:
     return int(len(idx) > 0) + int((np.diff(idx) > gap + 1).sum())
 
 
-def _length_matrix(n_nodes: int, edges: np.ndarray, length_m: np.ndarray):
-    from scipy import sparse
-
-    rows, cols = np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]]
-    return sparse.csr_matrix((np.r_[length_m, length_m], (rows, cols)), shape=(n_nodes, n_nodes))
-
-
 def cycle_rank(n_nodes: int, edges: np.ndarray) -> int:
     """Independent cycles of an undirected graph with ``n_nodes`` nodes and ``edges`` (E, 2): E - N + components."""
     from scipy.sparse.csgraph import connected_components
 
+    from dynactivegs.planning.paths import cost_matrix
+    from dynactivegs.selection.voronoi import edge_list_arrays
+
     if n_nodes == 0:
         return 0
-    n_comp = connected_components(_length_matrix(n_nodes, edges, np.ones(len(edges))), directed=False)[0]
+    arrays = edge_list_arrays(n_nodes, edges, np.ones(len(edges)))
+    n_comp = connected_components(cost_matrix(arrays, arrays.length_m), directed=False)[0]
     return int(len(edges) - n_nodes + n_comp)
 
 
@@ -97,7 +94,8 @@ def detour_ratio(node_xy: np.ndarray, edges: np.ndarray, length_m: np.ndarray, p
     graph node positions, then the target; the points that are nodes (within 1 mm) make the chain, each link
     measured by its edge's ``length_m`` (straight, when two are not joined by an edge). 1 when fewer than two
     of them are nodes."""
-    from scipy.sparse.csgraph import dijkstra
+    from dynactivegs.planning.paths import cost_matrix, dijkstra
+    from dynactivegs.selection.voronoi import edge_list_arrays
 
     if len(node_xy) == 0 or len(path_xy) < 2:
         return 1.0
@@ -106,10 +104,11 @@ def detour_ratio(node_xy: np.ndarray, edges: np.ndarray, length_m: np.ndarray, p
     chain = [k for i, k in enumerate(chain) if i == 0 or k != chain[i - 1]]
     if len(chain) < 2:
         return 1.0
-    lengths = _length_matrix(len(node_xy), edges, length_m)
+    arrays = edge_list_arrays(len(node_xy), edges, length_m)
+    lengths = cost_matrix(arrays, arrays.length_m)
     held = sum(float(lengths[a, b]) or float(np.hypot(*(node_xy[a] - node_xy[b])))
                for a, b in zip(chain[:-1], chain[1:]))
-    best = float(dijkstra(lengths, directed=False, indices=chain[0])[chain[-1]])
+    best = float(dijkstra(arrays, arrays.length_m, chain[0])[0][chain[-1]])
     return held / best if best > 0 else 1.0
 
 

@@ -55,7 +55,7 @@ from dynactivegs.planning.actions import (ActionConfig, PathStep, StuckState, fo
                                           side_clearance, steer_clear, update_stuck)
 from dynactivegs.planning.paths import PathConfig, dijkstra, ema_update, variant_edge_cost
 from dynactivegs.records import PlanningOut, RobotPose2D, SelectionOut, StepRecord, robot_pose_of
-from dynactivegs.selection.voronoi import GraphArrays, nearest_clear_node
+from dynactivegs.selection.voronoi import GraphArrays, edge_list_arrays, nearest_clear_node
 from dynactivegs.sim.robot import Action, wrap_angle
 
 
@@ -260,10 +260,8 @@ def _plan(cfg: PlanningConfig, sel: SelectionOut, now_map: FloorMap | None, ema_
     n = len(sel.node_xy_m)
     if n == 0 or sel.target_node < 0:
         return np.zeros((0, 2)), math.nan
-    u = sel.edges[:, 0].astype(np.int64)
-    v = sel.edges[:, 1].astype(np.int64)
-    arrays = GraphArrays(n, u, v, sel.edge_length_m.astype(np.float64), np.zeros(len(u) + 1, np.int64),
-                         np.zeros((0, 2), np.int64))
+    arrays = edge_list_arrays(n, sel.edges, sel.edge_length_m)
+    u, v = arrays.u, arrays.v
     a, b = sel.node_xy_m[u], sel.node_xy_m[v]
     zero = np.zeros(len(u))
     um_now = segment_means(now_map, a, b, cfg.sample_spacing_m) if now_map is not None and len(u) else zero

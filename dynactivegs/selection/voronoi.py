@@ -490,3 +490,12 @@ def graph_arrays(G: nx.Graph) -> GraphArrays:
     start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     cells = np.concatenate(chains) if chains else np.zeros((0, 2), np.int64)
     return GraphArrays(n, u, v, length, start, cells)
+
+
+def edge_list_arrays(n_nodes: int, edges: np.ndarray, length_m: np.ndarray) -> GraphArrays:
+    """The edge arrays of a graph given as an edge list (``SelectionOut.edges`` (E, 2) with ``u < v``, sorted,
+    and ``edge_length_m`` (E,)), without cell chains: for Dijkstra, not for line integrals."""
+    u = edges[:, 0].astype(np.int64)
+    v = edges[:, 1].astype(np.int64)
+    return GraphArrays(n_nodes, u, v, np.asarray(length_m, np.float64).copy(), np.zeros(len(u) + 1, np.int64),
+                       np.zeros((0, 2), np.int64))
