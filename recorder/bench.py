@@ -45,6 +45,7 @@ SUITES: dict[str, tuple[str, ...]] = {
     "tiny": ("tiny-00", "tiny-01"),
     "apartment": tuple(f"apartment-{i:02d}" for i in range(4)),
     "house": tuple(f"house-{i:02d}" for i in range(4)),
+    "loop": tuple(f"loop-{i:02d}" for i in range(4)),
 }
 """Named scene suites of ``--suite``."""
 
@@ -105,7 +106,7 @@ def parse_list(text: str, what: str) -> list[str]:
 
 
 def resolve_scenes(suite: str) -> list[str]:
-    """A suite name (tiny, apartment, house) or a comma list of scene names; unknown scenes fail in one line."""
+    """A suite name (tiny, apartment, house, loop) or a comma list of scene names; unknown scenes fail in one line."""
     from dynactivegs.sim.config import SimConfig
     from dynactivegs.sim.scenes import load_scene
 

@@ -122,7 +122,7 @@ class SimConfig:
     """The embedded simulator: scene, camera, robot, people, clock."""
 
     scene: str = "apartment-00"
-    """A procedural scene name (tiny-NN, apartment-NN, house-NN) or a mesh file (.glb/.gltf/.ply/.obj)."""
+    """A procedural scene name (tiny-NN, apartment-NN, house-NN, loop-NN) or a mesh file (.glb/.gltf/.ply/.obj)."""
     mesh_up_axis: str = "auto"
     """Up axis of a mesh file: auto (Y for .glb/.gltf, Z otherwise), or one of x, y, z, -x, -y, -z."""
     mesh_floor_z_m: float = math.nan

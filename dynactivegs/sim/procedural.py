@@ -6,6 +6,10 @@ Named suites (DESIGN.md §4):
 - ``tiny-NN``: one room, for tests.
 - ``apartment-NN``: 4-6 rooms, about 60-100 m^2 (like the paper's Gibson scenes).
 - ``house-NN``: 8-12 rooms, about 150-250 m^2 (like its Matterport3D scenes).
+- ``loop-NN``: the floor plan of ``apartment-NN`` (the same rooms and corridor) with a door in
+  every wall that two rooms share over at least 1.4 m (bathrooms included), so the free
+  space has ways round: two routes between rooms, where a planner that avoids busy edges
+  has a choice (the apartments' rooms mostly hang off one corridor by one door each).
 
 ``NN`` is a two-digit instance number; ``-00`` .. ``-07`` are the standard instances used by
 benchmarks. A scene depends only on its name: the same name always gives the same mesh.
@@ -26,10 +30,13 @@ from dynactivegs.sim.scene import Scene, ScenePart, TriplanarMaterials
 from dynactivegs.sim.textures import Material, make_material
 
 SUITES = {
-    "tiny": dict(rooms=(1, 1), area_m2=(16.0, 26.0), corridor_prob=0.0),
-    "apartment": dict(rooms=(4, 6), area_m2=(62.0, 96.0), corridor_prob=0.5),
-    "house": dict(rooms=(8, 12), area_m2=(160.0, 240.0), corridor_prob=1.0),
+    "tiny": dict(rooms=(1, 1), area_m2=(16.0, 26.0), corridor_prob=0.0, extra_door_prob=0.2, bath_extra=False),
+    "apartment": dict(rooms=(4, 6), area_m2=(62.0, 96.0), corridor_prob=0.5, extra_door_prob=0.2, bath_extra=False),
+    "house": dict(rooms=(8, 12), area_m2=(160.0, 240.0), corridor_prob=1.0, extra_door_prob=0.2, bath_extra=False),
+    "loop": dict(rooms=(4, 6), area_m2=(62.0, 96.0), corridor_prob=0.5, extra_door_prob=1.0, bath_extra=True),
 }
+"""Per suite: room count and floor area ranges, the chance of a corridor, and the chance of a door in a shared
+wall beyond those that connect the rooms, and whether a bathroom gets such doors."""
 STANDARD_INSTANCES = {suite: tuple(f"{suite}-{i:02d}" for i in range(8)) for suite in SUITES}
 
 WALL_T_M = 0.10            # interior wall thickness (each room contributes half)
@@ -37,7 +44,7 @@ DOOR_H_M = 2.10            # door opening height
 MIN_ROOM_SIDE_M = 2.4      # no room narrower than this
 DOOR_KEEPOUT_M = 1.0       # furniture stays this far from a door, on both sides
 CHECK_RADIUS_M = 0.3       # every room must stay reachable for a body of this radius (a person)
-_NAME_RE = re.compile(r"^(tiny|apartment|house)-(\d{2})$")
+_NAME_RE = re.compile(r"^(tiny|apartment|house|loop)-(\d{2})$")
 
 
 @dataclass(frozen=True)
@@ -78,10 +85,11 @@ def make_scene(name: str) -> Scene:
     """The procedural scene called ``name`` (e.g. ``apartment-03``)."""
     m = _NAME_RE.match(name)
     if m is None:
-        raise SceneError(f"unknown scene {name!r}: use tiny-NN, apartment-NN or house-NN (NN = 00..99), "
+        raise SceneError(f"unknown scene {name!r}: use tiny-NN, apartment-NN, house-NN or loop-NN (NN = 00..99), "
                          "or a path to a .glb/.gltf/.ply/.obj mesh")
     suite = m.group(1)
-    rng = derive_rng(zlib.crc32(name.encode()), "procedural-scene")
+    plan = f"apartment-{m.group(2)}" if suite == "loop" else name   # loop-NN: apartment-NN's rooms, more doors
+    rng = derive_rng(zlib.crc32(plan.encode()), "procedural-scene")
     return _Generator(name, suite, rng).build()
 
 
@@ -494,7 +502,8 @@ class _Generator:
                 take(int(k))
         for k in range(len(adj)):
             i, j = adj[k][:2]
-            if k not in chosen and rng.random() < 0.2 and "bathroom" not in (rooms[i].kind, rooms[j].kind):
+            if (k not in chosen and rng.random() < self.params["extra_door_prob"]
+                    and (self.params["bath_extra"] or "bathroom" not in (rooms[i].kind, rooms[j].kind))):
                 chosen.append(k)
         doors = []
         for k in sorted(chosen):

@@ -20,7 +20,7 @@ def test_same_name_same_mesh_and_different_names_differ():
 
 
 @pytest.mark.parametrize("suite,rooms,area", [("tiny", (1, 1), (14, 28)), ("apartment", (4, 6), (60, 100)),
-                                               ("house", (8, 12), (150, 250))])
+                                               ("house", (8, 12), (150, 250)), ("loop", (4, 6), (60, 100))])
 def test_suites_have_their_sizes(suite, rooms, area):
     for name in STANDARD_INSTANCES[suite][:3]:
         s = load_scene(SimConfig(scene=name))
@@ -36,7 +36,7 @@ def test_suites_have_their_sizes(suite, rooms, area):
 def test_every_room_and_door_is_reachable_in_the_mesh_free_space():
     """Furniture never blocks a door: from the mesh itself, every door centre and every room is
     in the single navigable component, for the robot and for a person."""
-    for name in ("apartment-00", "apartment-01", "house-00"):
+    for name in ("apartment-00", "apartment-01", "house-00", "loop-00"):
         s = load_scene(SimConfig(scene=name))
         fs = scene_freespace(s, scene_renderer(s), 0.05, 1.5)
         for radius in (0.18, 0.3):
@@ -50,6 +50,33 @@ def test_every_room_and_door_is_reachable_in_the_mesh_free_space():
                 assert nav[i0:i1, j0:j1].sum() * 0.0025 > 0.5, f"{name}: room {r.name} unreachable at r={radius}"
 
 
+def _door_loops(doors, n_rooms: int) -> int:
+    """Independent cycles of the rooms-and-doors graph (doors - rooms + components)."""
+    parent = list(range(n_rooms))
+
+    def find(x: int) -> int:
+        while parent[x] != x:
+            x = parent[x]
+        return x
+
+    for d in doors:
+        parent[find(d.rooms[0])] = find(d.rooms[1])
+    return len(doors) - n_rooms + len({find(i) for i in range(n_rooms)})
+
+
+def test_loop_scenes_are_the_apartments_with_ways_round():
+    """loop-NN has apartment-NN's rooms, a superset of its room pairs joined by doors, and at least one loop
+    through the doors, in every standard instance; apartments keep their own doors."""
+    loops = []
+    for i in range(8):
+        a, b = make_scene(f"apartment-{i:02d}"), make_scene(f"loop-{i:02d}")
+        assert [(r.kind, r.x0, r.y0, r.x1, r.y1) for r in a.rooms] == [(r.kind, r.x0, r.y0, r.x1, r.y1) for r in b.rooms]
+        assert {d.rooms for d in a.doors} <= {d.rooms for d in b.doors}
+        loops.append((_door_loops(a.doors, len(a.rooms)), _door_loops(b.doors, len(b.rooms))))
+    assert all(lb >= 1 for _, lb in loops), loops
+    assert sum(lb for _, lb in loops) >= 2 * sum(la for la, _ in loops) + 8, loops
+
+
 def test_surfaces_are_textured_not_flat():
     s = make_scene("apartment-00")
     tex = s.parts[0].appearance.textures
@@ -59,7 +86,7 @@ def test_surfaces_are_textured_not_flat():
 
 
 def test_unknown_scene_names_fail_clearly():
-    for bad in ("apartment-1", "mansion-00", "apartment-000"):
+    for bad in ("apartment-1", "mansion-00", "apartment-000", "loop-7"):
         with pytest.raises(SceneError) as e:
             make_scene(bad)
         assert "\n" not in str(e.value) and "tiny-NN" in str(e.value)
