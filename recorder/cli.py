@@ -21,8 +21,8 @@ DEFAULT_STEPS = 150
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="dagsrun", description="Run the robot's closed loop (perception, mapping, "
                                 "fields, selection, planning) in a scene with moving people.")
-    p.add_argument("--scene", help="tiny-NN, apartment-NN, house-NN, loop-NN or a .glb/.gltf/.ply/.obj path (default: the "
-                   "preset's, apartment-00)")
+    p.add_argument("--scene", help="tiny-NN, apartment-NN, house-NN, loop-NN or a .glb/.gltf/.ply/.obj path "
+                   "(default: the preset's, apartment-00)")
     p.add_argument("--preset", default="full", help=f"one of {', '.join(PRESETS)} (default: full)")
     p.add_argument("--steps", type=int, default=DEFAULT_STEPS, help=f"robot actions (default: {DEFAULT_STEPS})")
     p.add_argument("--seed", type=int, help="master seed (default: the preset's, 0)")

@@ -35,8 +35,8 @@ SUITES = {
     "house": dict(rooms=(8, 12), area_m2=(160.0, 240.0), corridor_prob=1.0, extra_door_prob=0.2, bath_extra=False),
     "loop": dict(rooms=(4, 6), area_m2=(62.0, 96.0), corridor_prob=0.5, extra_door_prob=1.0, bath_extra=True),
 }
-"""Per suite: room count and floor area ranges, the chance of a corridor, and the chance of a door in a shared
-wall beyond those that connect the rooms, and whether a bathroom gets such doors."""
+"""Per suite: the room count and floor area ranges, the chance of a corridor, the chance of each further door in
+a shared wall (beyond the doors that connect the rooms), and whether bathrooms get such further doors."""
 STANDARD_INSTANCES = {suite: tuple(f"{suite}-{i:02d}" for i in range(8)) for suite in SUITES}
 
 WALL_T_M = 0.10            # interior wall thickness (each room contributes half)

@@ -70,7 +70,8 @@ def test_loop_scenes_are_the_apartments_with_ways_round():
     loops = []
     for i in range(8):
         a, b = make_scene(f"apartment-{i:02d}"), make_scene(f"loop-{i:02d}")
-        assert [(r.kind, r.x0, r.y0, r.x1, r.y1) for r in a.rooms] == [(r.kind, r.x0, r.y0, r.x1, r.y1) for r in b.rooms]
+        rooms_a, rooms_b = ([(r.kind, r.x0, r.y0, r.x1, r.y1) for r in s.rooms] for s in (a, b))
+        assert rooms_a == rooms_b
         assert {d.rooms for d in a.doors} <= {d.rooms for d in b.doors}
         loops.append((_door_loops(a.doors, len(a.rooms)), _door_loops(b.doors, len(b.rooms))))
     assert all(lb >= 1 for _, lb in loops), loops
