@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import networkx as nx
 import numpy as np
 import pytest
 
@@ -52,16 +53,10 @@ def test_every_room_and_door_is_reachable_in_the_mesh_free_space():
 
 def _door_loops(doors, n_rooms: int) -> int:
     """Independent cycles of the rooms-and-doors graph (doors - rooms + components)."""
-    parent = list(range(n_rooms))
-
-    def find(x: int) -> int:
-        while parent[x] != x:
-            x = parent[x]
-        return x
-
-    for d in doors:
-        parent[find(d.rooms[0])] = find(d.rooms[1])
-    return len(doors) - n_rooms + len({find(i) for i in range(n_rooms)})
+    g = nx.MultiGraph()
+    g.add_nodes_from(range(n_rooms))
+    g.add_edges_from(d.rooms for d in doors)
+    return g.number_of_edges() - n_rooms + nx.number_connected_components(g)
 
 
 def test_loop_scenes_are_the_apartments_with_ways_round():
