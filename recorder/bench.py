@@ -593,7 +593,25 @@ def run(args: argparse.Namespace) -> int:
     finished = [r for r in load_results(args.out) if (r["preset"], r["scene"], r["seed"]) in wanted]
     for path in write_reports(finished, args.out):
         print(f"  {path}")
+    for line in pair_lines(finished):
+        print(line)
     return 0
+
+
+def pair_lines(runs: list[dict[str, Any]], reference: str = "baseline") -> list[str]:
+    """One line per method: the (scene, seed) pairs where it beats ``reference`` on Acc, C.R. and PSNR."""
+    from dynactivegs.eval.tables import PAIR_METRICS, PAIR_SHORT, pairs_table
+
+    t = pairs_table(runs, reference)
+    if t is None:
+        return []
+    lines = []
+    for m in t.header[2:]:
+        recs = [r for r in t.records if r["method"] == m]
+        each = ", ".join(f"{PAIR_SHORT[k]} {sum(r[f'beats_{k}'] for r in recs)}" for k in PAIR_METRICS)
+        lines.append(f"dagsbench: {m} beats {reference} on all of Acc, C.R. and PSNR in "
+                     f"{sum(r['beats_all'] for r in recs)} of {len(recs)} (scene, seed) pairs ({each}; wins.md)")
+    return lines
 
 
 def main(argv: list[str] | None = None) -> int:

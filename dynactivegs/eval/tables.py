@@ -20,6 +20,9 @@ until ``dagsbench --reevaluate``.
 The ablation tables follow the paper's Tables 3-5. Their rows are chosen by what a run's
 config switches on (weighted mapping, selection variant, planner variant), not by preset
 name, so e.g. ``motion_view`` and ``plan_shortest`` (the same config) fill the same row.
+
+The pairs table puts each method against ``baseline`` run against run: on which of Acc, C.R. and PSNR it is
+better in each (scene, seed) pair, how many pairs it wins on all three, and the paired mean differences.
 """
 
 from __future__ import annotations
@@ -267,6 +270,90 @@ def planner_table(runs: Sequence[dict[str, Any]]) -> Table | None:
     return _ablation("Ablation: planner (Table 5 layout)", PLANNER_ROWS, runs, cols, (), lambda sw: ())
 
 
+# ---------------------------------------------------------------------------------------- pairs
+PAIR_METRICS = ("acc_cm", "cr_pct", "psnr_db")
+PAIR_SHORT = {"acc_cm": "Acc", "comp_cm": "Comp", "cr_pct": "C.R.", "psnr_db": "PSNR", "ssim": "SSIM",
+              "depth_l1_cm": "Depth L1", "observed_pct": "Obs.", "observed_view_pct": "Obs. views"}
+
+
+def _beats(value: float | None, ref: float | None, higher: bool) -> bool:
+    """Strictly better at full precision (a tie is no win); a missing value never wins."""
+    if value is None or ref is None:
+        return False
+    return value > ref if higher else value < ref
+
+
+def _signed(values: np.ndarray, digits: int) -> str:
+    """Mean with its sign, +- the sample std from two values on; "n/a" for none."""
+    c = mean_std(values)
+    if c.mean is None:
+        return "n/a"
+    return f"{c.mean:+.{digits}f}" + (f" ± {c.std:.{digits}f}" if c.n >= 2 else "")
+
+
+def pairs_table(runs: Sequence[dict[str, Any]], reference: str = "baseline", metrics: Sequence[str] = PAIR_METRICS,
+                fraction: float = 1.0) -> Table | None:
+    """Per (scene, seed) pair: which of ``metrics`` each method beats ``reference`` on, run against run.
+
+    The closed loop spreads single runs widely, so a mean can hide that a method wins few pairs; this counts
+    them. Rows: the pairs ``reference`` and at least one other method both ran, then per method the number of
+    pairs won on every metric and on each, and the paired mean difference (method - reference) +- its sample
+    std. A cell reads "all" (beats it on every metric, in bold), the short names of the metrics it beats it on,
+    "none", or "" (no such run). None when ``reference`` or any other method is missing."""
+    runs = _dedupe(runs, lambda r: r["preset"])
+    by = {(r["preset"], r["scene"], r["seed"]): r for r in runs}
+    methods = [m for m in _ordered((r["preset"] for r in runs), PRESET_ORDER) if m != reference]
+    pairs = sorted({(s, k) for p, s, k in by if p == reference and any((m, s, k) in by for m in methods)},
+                   key=lambda t: (t[1], t[0]))
+    methods = [m for m in methods if any((m, s, k) in by for s, k in pairs)]
+    if not pairs or not methods:
+        return None
+    specs = [METRIC_BY_KEY[k] for k in metrics]
+    won = {m: {} for m in methods}                  # method -> (scene, seed) -> per-metric win flags
+    diff = {m: [] for m in methods}                 # method -> per pair, per metric: method - reference
+    rows, best, records = [], [], []
+    for s, k in pairs:
+        ref = by[(reference, s, k)]
+        cells, flags = [], []
+        for m in methods:
+            run = by.get((m, s, k))
+            if run is None:
+                cells.append("")
+                flags.append(False)
+                continue
+            vals = [_value(run, spec.key, fraction) for spec in specs]
+            refs = [_value(ref, spec.key, fraction) for spec in specs]
+            w = [_beats(v, r, spec.higher_is_better) for v, r, spec in zip(vals, refs, specs)]
+            won[m][(s, k)] = w
+            if all(v is not None and r is not None for v, r in zip(vals, refs)):
+                diff[m].append([v - r for v, r in zip(vals, refs)])   # type: ignore[operator]
+            cells.append("all" if all(w) else (", ".join(PAIR_SHORT.get(spec.key, spec.key)
+                                                        for spec, x in zip(specs, w) if x) or "none"))
+            flags.append(all(w))
+            records.append({"method": m, "scene": s, "seed": k,
+                            **{f"beats_{spec.key}": x for spec, x in zip(specs, w)}, "beats_all": all(w)})
+        rows.append((s, str(k), *cells))
+        best.append((False, False, *flags))
+    names = "all " + " / ".join(PAIR_SHORT.get(spec.key, spec.key) for spec in specs)
+    counts, means = [], []
+    for m in methods:
+        ws = list(won[m].values())
+        n = len(ws)
+        each = " / ".join(str(sum(w[i] for w in ws)) for i in range(len(specs)))
+        counts.append(f"{sum(all(w) for w in ws)} / {each} of {n}")
+        d = np.asarray(diff[m], dtype=np.float64).reshape(-1, len(specs))
+        means.append(" / ".join(_signed(d[:, i], spec.digits) for i, spec in enumerate(specs)))
+    rows.append(("pairs won", names, *counts))
+    rows.append(("mean difference", " / ".join(PAIR_SHORT.get(spec.key, spec.key) for spec in specs), *means))
+    best += [(False,) * (2 + len(methods))] * 2
+    note = (f"Each method against `{reference}`, run against run on the same (scene, seed), metrics at "
+            f"{fraction:.0%} of the budget; a win is a strictly better value (lower Acc, Comp, depth L1; higher "
+            f"C.R., PSNR, SSIM); \"all\" (bold): better on every metric. Mean difference: method - {reference}, "
+            f"± the sample std over the pairs.")
+    return Table(f"Pairs against {reference}", ("Scene", "Seed", *methods), tuple(rows), tuple(best),
+                 tuple(records), note, n_lead=2)
+
+
 # ---------------------------------------------------------------------------------------- output
 def to_markdown(t: Table) -> str:
     """The table as GitHub Markdown, best cells in bold, with its title and note."""
@@ -373,7 +460,8 @@ def write_reports(runs: Sequence[dict[str, Any]], out_dir: Path) -> list[Path]:
     if not runs:
         return []
     tables = {"main": main_table(runs), "ablation_components": components_table(runs),
-              "ablation_selection": selection_table(runs), "ablation_planner": planner_table(runs)}
+              "ablation_selection": selection_table(runs), "ablation_planner": planner_table(runs),
+              "wins": pairs_table(runs)}
     written = []
     for name, t in tables.items():
         if t is None:

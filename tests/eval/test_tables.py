@@ -11,8 +11,9 @@ import pytest
 
 from dynactivegs.config import PRESETS, to_json
 from dynactivegs.eval import tables
-from dynactivegs.eval.tables import (components_table, main_table, planner_table, selection_table, to_csv,
-                                     to_markdown, write_reports)
+from dynactivegs.eval.tables import (components_table, main_table, pairs_table, planner_table, selection_table,
+                                     to_csv, to_markdown, write_reports)
+from recorder.bench import pair_lines
 
 
 def fake_run(preset: str, scene: str, seed: int, *, acc: float, cr: float, psnr: float, steps: int = 100,
@@ -109,7 +110,7 @@ def test_write_reports_writes_tables_and_pngs(tmp_path):
     paths = write_reports(runs_two_methods(), tmp_path)
     names = sorted(p.name for p in paths)
     assert names == ["ablation_components.csv", "ablation_components.md", "coverage.png", "main.csv", "main.md",
-                     "progress.png"]
+                     "progress.png", "wins.csv", "wins.md"]
     for p in paths:
         if p.suffix == ".png":
             assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and p.stat().st_size > 5000
@@ -117,3 +118,47 @@ def test_write_reports_writes_tables_and_pngs(tmp_path):
     # the mean of scenes a (25 dB) and b (23 dB) at each checkpoint
     np.testing.assert_allclose(series["full"][1], [24.0 * f for f in tables.FRACTIONS])
     assert write_reports([], tmp_path / "empty") == []
+
+
+def test_pairs_table_counts_wins_run_against_run():
+    runs = runs_two_methods()
+    # full on scene a beats baseline on all three (2 < 4 cm, 90-94 > 80 %, 25 > 20 dB); on scene b it loses Acc
+    # (3 > 1 cm) and wins C.R. (80-84 > 70 %) and PSNR (23 > 21 dB)
+    runs.append(fake_run("weighted", "a", 0, acc=4.0, cr=81.0, psnr=19.0))   # ties Acc: no win
+    t = pairs_table(runs)
+    assert t.header == ("Scene", "Seed", "weighted", "full")
+    by_pair = {(r[0], r[1]): r[2:] for r in t.rows[:-2]}
+    assert by_pair[("a", "0")] == ("C.R.", "all") and by_pair[("b", "0")] == ("", "C.R., PSNR")
+    assert by_pair[("a", "2")] == ("", "all")
+    assert [r[0] for r in t.rows[:6]] == ["a", "b", "a", "b", "a", "b"]                # ordered by seed, then scene
+    won = t.rows[-2]
+    assert won[:2] == ("pairs won", "all Acc / C.R. / PSNR") and won[2:] == ("0 / 0 / 1 / 0 of 1", "3 / 3 / 6 / 6 of 6")
+    diff = t.rows[-1]
+    # full - baseline over the 6 pairs: Acc -2 on a, +2 on b; C.R. 10 / 12 / 14 on both; PSNR 5 on a, 2 on b
+    assert diff[2:] == ("+0.00 / +1.0 / -1.00", "+0.00 ± 2.19 / +12.0 ± 1.8 / +3.50 ± 1.64")
+    assert [b[3] for b in t.best[:-2]] == [True, False] * 3 and not any(t.best[-1])
+    md = to_markdown(t)
+    assert "| a | 0 | C.R. | **all** |" in md
+    recs = list(csv.DictReader(io.StringIO(to_csv(t))))
+    assert len(recs) == 7 and sum(r["beats_all"] == "True" for r in recs) == 3
+    assert pair_lines(runs) == [
+        "dagsbench: weighted beats baseline on all of Acc, C.R. and PSNR in 0 of 1 (scene, seed) pairs "
+        "(Acc 0, C.R. 1, PSNR 0; wins.md)",
+        "dagsbench: full beats baseline on all of Acc, C.R. and PSNR in 3 of 6 (scene, seed) pairs "
+        "(Acc 3, C.R. 6, PSNR 6; wins.md)"]
+
+
+def test_pairs_table_needs_the_reference_and_a_rival():
+    only_full = [fake_run("full", "a", 0, acc=1, cr=50.0, psnr=20)]
+    assert pairs_table(only_full) is None and pair_lines(only_full) == []
+    assert pairs_table([fake_run("baseline", "a", 0, acc=1, cr=50.0, psnr=20)]) is None
+    # a method with no pair in common with the reference is left out
+    t = pairs_table([fake_run("baseline", "a", 0, acc=1, cr=50.0, psnr=20),
+                     fake_run("full", "a", 1, acc=1, cr=50.0, psnr=20)])
+    assert t is None
+    # a missing metric (e.g. PSNR n/a) never counts as a win
+    r = fake_run("full", "a", 0, acc=0.5, cr=60.0, psnr=30)
+    for c in r["checkpoints"]:
+        c["psnr_db"] = None
+    t = pairs_table([fake_run("baseline", "a", 0, acc=1, cr=50.0, psnr=20), r])
+    assert t.rows[0][2] == "Acc, C.R." and t.rows[-2][2] == "0 / 1 / 1 / 0 of 1"

@@ -82,8 +82,8 @@ def test_log_replays_as_whole_steps(finished):
 
 def test_tables_and_plots_are_written(finished):
     out, _ = finished
-    for name in ("main.md", "main.csv", "ablation_components.md", "ablation_components.csv", "progress.png",
-                 "coverage.png"):
+    for name in ("main.md", "main.csv", "ablation_components.md", "ablation_components.csv", "wins.md", "wins.csv",
+                 "progress.png", "coverage.png"):
         assert (out / name).stat().st_size > 0, name
     md = (out / "main.md").read_text()
     assert "| Method | Metric | tiny-00 | Mean |" in md and "| full | C.R. (%) |" in md and "**" in md
@@ -97,6 +97,10 @@ def test_second_invocation_skips_finished_runs(finished, capsys):
     assert bench.main(tiny_args(out, cache)) == 0
     printed = capsys.readouterr().out
     assert "0 runs in" in printed and "2 already finished (skipped)" in printed
+    # the (scene, seed) pairs full won against baseline, as wins.md counts them
+    wins = (out / "wins.md").read_text()
+    assert "| tiny-00 | 0 |" in wins and "| pairs won | all Acc / C.R. / PSNR |" in wins
+    assert "dagsbench: full beats baseline on all of Acc, C.R. and PSNR in " in printed and " of 1 (scene, seed)" in printed
     assert (out / "runs" / "full" / "tiny-00-seed0.json").stat().st_mtime_ns == stamp
 
 
