@@ -291,6 +291,29 @@ def _signed(values: np.ndarray, digits: int) -> str:
     return f"{c.mean:+.{digits}f}" + (f" ± {c.std:.{digits}f}" if c.n >= 2 else "")
 
 
+Pair = tuple[str, int]                              # (scene, seed)
+
+
+def paired(runs: Sequence[dict[str, Any]], reference: str = "baseline", metrics: Sequence[str] = PAIR_METRICS,
+           fraction: float = 1.0) -> dict[str, dict[Pair, tuple[list[float | None], list[float | None]]]]:
+    """Per method other than ``reference`` (in table order), per (scene, seed) pair that both ran (ordered by
+    seed, then scene): (its values of ``metrics``, the reference's) at ``fraction`` of the budget. Methods with
+    no pair in common are left out; empty without the reference."""
+    runs = _dedupe(runs, lambda r: r["preset"])
+    by = {(r["preset"], r["scene"], r["seed"]): r for r in runs}
+    pairs = sorted({(s, k) for p, s, k in by if p == reference}, key=lambda t: (t[1], t[0]))
+    out: dict[str, dict[Pair, tuple[list[float | None], list[float | None]]]] = {}
+    for m in _ordered((r["preset"] for r in runs), PRESET_ORDER):
+        if m == reference:
+            continue
+        got = {(s, k): ([_value(by[(m, s, k)], key, fraction) for key in metrics],
+                        [_value(by[(reference, s, k)], key, fraction) for key in metrics])
+               for s, k in pairs if (m, s, k) in by}
+        if got:
+            out[m] = got
+    return out
+
+
 def pairs_table(runs: Sequence[dict[str, Any]], reference: str = "baseline", metrics: Sequence[str] = PAIR_METRICS,
                 fraction: float = 1.0) -> Table | None:
     """Per (scene, seed) pair: which of ``metrics`` each method beats ``reference`` on, run against run.
@@ -300,51 +323,40 @@ def pairs_table(runs: Sequence[dict[str, Any]], reference: str = "baseline", met
     pairs won on every metric and on each, and the paired mean difference (method - reference) +- its sample
     std. A cell reads "all" (beats it on every metric, in bold), the short names of the metrics it beats it on,
     "none", or "" (no such run). None when ``reference`` or any other method is missing."""
-    runs = _dedupe(runs, lambda r: r["preset"])
-    by = {(r["preset"], r["scene"], r["seed"]): r for r in runs}
-    methods = [m for m in _ordered((r["preset"] for r in runs), PRESET_ORDER) if m != reference]
-    pairs = sorted({(s, k) for p, s, k in by if p == reference and any((m, s, k) in by for m in methods)},
-                   key=lambda t: (t[1], t[0]))
-    methods = [m for m in methods if any((m, s, k) in by for s, k in pairs)]
-    if not pairs or not methods:
+    per = paired(runs, reference, metrics, fraction)
+    if not per:
         return None
+    methods = list(per)
+    pairs = sorted({pk for got in per.values() for pk in got}, key=lambda t: (t[1], t[0]))
     specs = [METRIC_BY_KEY[k] for k in metrics]
-    won = {m: {} for m in methods}                  # method -> (scene, seed) -> per-metric win flags
-    diff = {m: [] for m in methods}                 # method -> per pair, per metric: method - reference
+    short = [PAIR_SHORT.get(spec.key, spec.key) for spec in specs]
     rows, best, records = [], [], []
     for s, k in pairs:
-        ref = by[(reference, s, k)]
         cells, flags = [], []
         for m in methods:
-            run = by.get((m, s, k))
-            if run is None:
+            if (s, k) not in per[m]:
                 cells.append("")
                 flags.append(False)
                 continue
-            vals = [_value(run, spec.key, fraction) for spec in specs]
-            refs = [_value(ref, spec.key, fraction) for spec in specs]
+            vals, refs = per[m][(s, k)]
             w = [_beats(v, r, spec.higher_is_better) for v, r, spec in zip(vals, refs, specs)]
-            won[m][(s, k)] = w
-            if all(v is not None and r is not None for v, r in zip(vals, refs)):
-                diff[m].append([v - r for v, r in zip(vals, refs)])   # type: ignore[operator]
-            cells.append("all" if all(w) else (", ".join(PAIR_SHORT.get(spec.key, spec.key)
-                                                        for spec, x in zip(specs, w) if x) or "none"))
+            cells.append("all" if all(w) else (", ".join(n for n, x in zip(short, w) if x) or "none"))
             flags.append(all(w))
             records.append({"method": m, "scene": s, "seed": k,
                             **{f"beats_{spec.key}": x for spec, x in zip(specs, w)}, "beats_all": all(w)})
         rows.append((s, str(k), *cells))
         best.append((False, False, *flags))
-    names = "all " + " / ".join(PAIR_SHORT.get(spec.key, spec.key) for spec in specs)
     counts, means = [], []
     for m in methods:
-        ws = list(won[m].values())
-        n = len(ws)
+        ws = [[r[f"beats_{spec.key}"] for spec in specs] for r in records if r["method"] == m]
         each = " / ".join(str(sum(w[i] for w in ws)) for i in range(len(specs)))
-        counts.append(f"{sum(all(w) for w in ws)} / {each} of {n}")
-        d = np.asarray(diff[m], dtype=np.float64).reshape(-1, len(specs))
-        means.append(" / ".join(_signed(d[:, i], spec.digits) for i, spec in enumerate(specs)))
-    rows.append(("pairs won", names, *counts))
-    rows.append(("mean difference", " / ".join(PAIR_SHORT.get(spec.key, spec.key) for spec in specs), *means))
+        counts.append(f"{sum(all(w) for w in ws)} / {each} of {len(ws)}")
+        d = [[v - r for v, r in zip(vals, refs)] for vals, refs in per[m].values()
+             if all(x is not None for x in (*vals, *refs))]
+        d_arr = np.asarray(d, dtype=np.float64).reshape(-1, len(specs))
+        means.append(" / ".join(_signed(d_arr[:, i], spec.digits) for i, spec in enumerate(specs)))
+    rows.append(("pairs won", "all " + " / ".join(short), *counts))
+    rows.append(("mean difference", " / ".join(short), *means))
     best += [(False,) * (2 + len(methods))] * 2
     note = (f"Each method against `{reference}`, run against run on the same (scene, seed), metrics at "
             f"{fraction:.0%} of the budget; a win is a strictly better value (lower Acc, Comp, depth L1; higher "
@@ -453,6 +465,52 @@ def plot_coverage(runs: Sequence[dict[str, Any]], path: Path) -> Path:
     return path
 
 
+def plot_wins(runs: Sequence[dict[str, Any]], path: Path, reference: str = "baseline") -> Path | None:
+    """Per metric of the pairs table, each method's gain over ``reference`` in every (scene, seed) pair, signed
+    so that up is better (lower Acc: up); filled where the method wins the pair on all of them. The axis spans
+    1.5 x the 90th percentile of the gains' size, so that one run far off does not squash the rest: points past
+    it sit on the edge as triangles with their value. None (nothing written) without pairs."""
+    per = paired(runs, reference)
+    if not per:
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    specs = [METRIC_BY_KEY[k] for k in PAIR_METRICS]
+    fig, axes = plt.subplots(1, len(specs), figsize=(4 * len(specs), 4))
+    for i, (ax, spec) in enumerate(zip(axes, specs)):
+        pts = []                                        # (x, gain, method index, won)
+        for j, got in enumerate(per.values()):
+            for n, (vals, refs) in enumerate(got.values()):
+                if vals[i] is None or refs[i] is None:
+                    continue
+                won = all(_beats(v, r, sp.higher_is_better) for v, r, sp in zip(vals, refs, specs))
+                x = j + 0.3 * ((n * 0.618) % 1.0 - 0.5)            # spread a method's pairs across its slot
+                pts.append((x, (vals[i] - refs[i]) * (1.0 if spec.higher_is_better else -1.0), j, won))
+        size = np.abs([g for _, g, _, _ in pts]) if pts else np.zeros(1)
+        lim = max(1.5 * float(np.percentile(size, 90)), 10.0 ** -spec.digits)
+        for x, g, j, won in pts:
+            off = abs(g) > lim
+            y = math.copysign(lim, g) if off else g
+            ax.scatter([x], [y], s=40 if off else 30, marker=("^" if g > 0 else "v") if off else "o", color=f"C{j}",
+                       facecolors=f"C{j}" if won else "none", zorder=3)
+            if off:
+                ax.annotate(f"{g:+.{spec.digits}f}", (x, y), xytext=(4, -10 if g > 0 else 4),
+                            textcoords="offset points", fontsize=7)
+        ax.set_ylim(-1.1 * lim, 1.1 * lim)
+        ax.axhline(0.0, color="k", lw=0.8)
+        ax.set_xticks(range(len(per)), list(per), rotation=20)
+        ax.set_ylabel(f"{spec.label}: gain over {reference}")
+        ax.grid(alpha=0.3, axis="y")
+    fig.suptitle(f"Each (scene, seed) pair against {reference}: above 0 is better; filled: better on all three")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
 def write_reports(runs: Sequence[dict[str, Any]], out_dir: Path) -> list[Path]:
     """Write every table that the runs allow (Markdown + CSV) and the plots into ``out_dir``; the paths written."""
     out_dir = Path(out_dir)
@@ -472,4 +530,5 @@ def write_reports(runs: Sequence[dict[str, Any]], out_dir: Path) -> list[Path]:
             written.append(p)
     written.append(plot_progress(runs, out_dir / "progress.png"))
     written.append(plot_coverage(runs, out_dir / "coverage.png"))
-    return written
+    wins = plot_wins(runs, out_dir / "wins.png")
+    return written + ([wins] if wins is not None else [])

@@ -110,7 +110,7 @@ def test_write_reports_writes_tables_and_pngs(tmp_path):
     paths = write_reports(runs_two_methods(), tmp_path)
     names = sorted(p.name for p in paths)
     assert names == ["ablation_components.csv", "ablation_components.md", "coverage.png", "main.csv", "main.md",
-                     "progress.png", "wins.csv", "wins.md"]
+                     "progress.png", "wins.csv", "wins.md", "wins.png"]
     for p in paths:
         if p.suffix == ".png":
             assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and p.stat().st_size > 5000
@@ -148,9 +148,10 @@ def test_pairs_table_counts_wins_run_against_run():
         "(Acc 3, C.R. 6, PSNR 6; wins.md)"]
 
 
-def test_pairs_table_needs_the_reference_and_a_rival():
+def test_pairs_table_needs_the_reference_and_a_rival(tmp_path):
     only_full = [fake_run("full", "a", 0, acc=1, cr=50.0, psnr=20)]
     assert pairs_table(only_full) is None and pair_lines(only_full) == []
+    assert tables.plot_wins(only_full, tmp_path / "wins.png") is None and not (tmp_path / "wins.png").exists()
     assert pairs_table([fake_run("baseline", "a", 0, acc=1, cr=50.0, psnr=20)]) is None
     # a method with no pair in common with the reference is left out
     t = pairs_table([fake_run("baseline", "a", 0, acc=1, cr=50.0, psnr=20),
