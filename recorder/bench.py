@@ -548,6 +548,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--reevaluate", action="store_true", help="measure the finished runs again from their MCAP logs "
                    "with the current evaluation settings (and --set eval.KEY=VALUE), without re-running them; "
                    "unfinished runs are not started")
+    p.add_argument("--wins-against", default="baseline", metavar="PRESET",
+                   help="the preset every other is put against, pair by pair, in wins.md / wins.png and the summary "
+                        "printed at the end (default: baseline)")
     return p
 
 
@@ -558,7 +561,7 @@ def default_workers() -> int:
 
 def run(args: argparse.Namespace) -> int:
     presets = parse_list(args.presets, "presets")
-    for p in presets:
+    for p in (*presets, args.wins_against):
         preset(p)                           # an unknown name fails before any scene is built
     try:
         seeds = [int(s) for s in parse_list(args.seeds, "seeds")]
@@ -591,9 +594,9 @@ def run(args: argparse.Namespace) -> int:
 
     wanted = {(s.preset, s.scene, s.seed) for s in specs}
     finished = [r for r in load_results(args.out) if (r["preset"], r["scene"], r["seed"]) in wanted]
-    for path in write_reports(finished, args.out):
+    for path in write_reports(finished, args.out, reference=args.wins_against):
         print(f"  {path}")
-    for line in pair_lines(finished):
+    for line in pair_lines(finished, args.wins_against):
         print(line)
     return 0
 

@@ -511,15 +511,16 @@ def plot_wins(runs: Sequence[dict[str, Any]], path: Path, reference: str = "base
     return path
 
 
-def write_reports(runs: Sequence[dict[str, Any]], out_dir: Path) -> list[Path]:
-    """Write every table that the runs allow (Markdown + CSV) and the plots into ``out_dir``; the paths written."""
+def write_reports(runs: Sequence[dict[str, Any]], out_dir: Path, reference: str = "baseline") -> list[Path]:
+    """Write every table that the runs allow (Markdown + CSV) and the plots into ``out_dir``; the paths written.
+    ``reference``: the preset the others are put against pair by pair (``wins``)."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     if not runs:
         return []
     tables = {"main": main_table(runs), "ablation_components": components_table(runs),
               "ablation_selection": selection_table(runs), "ablation_planner": planner_table(runs),
-              "wins": pairs_table(runs)}
+              "wins": pairs_table(runs, reference)}
     written = []
     for name, t in tables.items():
         if t is None:
@@ -530,5 +531,5 @@ def write_reports(runs: Sequence[dict[str, Any]], out_dir: Path) -> list[Path]:
             written.append(p)
     written.append(plot_progress(runs, out_dir / "progress.png"))
     written.append(plot_coverage(runs, out_dir / "coverage.png"))
-    wins = plot_wins(runs, out_dir / "wins.png")
+    wins = plot_wins(runs, out_dir / "wins.png", reference)
     return written + ([wins] if wins is not None else [])

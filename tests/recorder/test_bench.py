@@ -101,6 +101,11 @@ def test_second_invocation_skips_finished_runs(finished, capsys):
     wins = (out / "wins.md").read_text()
     assert "| tiny-00 | 0 |" in wins and "| pairs won | all Acc / C.R. / PSNR |" in wins
     assert "dagsbench: full beats baseline on all of Acc, C.R. and PSNR in " in printed and " of 1 (scene, seed)" in printed
+    # ... or against another preset
+    assert bench.main(tiny_args(out, cache, "baseline,full", "--wins-against", "full")) == 0
+    assert "dagsbench: baseline beats full on all of" in capsys.readouterr().out
+    assert "### Pairs against full" in (out / "wins.md").read_text()
+    assert bench.main(tiny_args(out, cache)) == 0           # the tables as before, for the tests after this one
     assert (out / "runs" / "full" / "tiny-00-seed0.json").stat().st_mtime_ns == stamp
 
 
@@ -142,6 +147,7 @@ def test_reevaluate_measures_finished_runs_again_from_their_logs(finished, tmp_p
 
 @pytest.mark.parametrize("argv, words", [
     (["--presets", "baseline,nope"], "unknown preset 'nope'"),
+    (["--wins-against", "nope"], "unknown preset 'nope'"),
     (["--suite", "mansion"], "mansion"),
     (["--seeds", "0,x"], "--seeds"),
     (["--set", "mapping.nope=1"], "unknown config key 'mapping.nope'"),
