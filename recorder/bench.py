@@ -550,7 +550,8 @@ def parser() -> argparse.ArgumentParser:
                    "unfinished runs are not started")
     p.add_argument("--wins-against", default="baseline", metavar="PRESET",
                    help="the preset every other is put against, pair by pair, in wins.md / wins.png and the summary "
-                        "printed at the end (default: baseline)")
+                        "printed at the end; only runs this command names count, so list it in --presets too "
+                        "(default: baseline)")
     return p
 
 
