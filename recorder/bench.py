@@ -604,17 +604,13 @@ def run(args: argparse.Namespace) -> int:
 
 def pair_lines(runs: list[dict[str, Any]], reference: str = "baseline") -> list[str]:
     """One line per method: the (scene, seed) pairs where it beats ``reference`` on Acc, C.R. and PSNR."""
-    from dynactivegs.eval.tables import PAIR_METRICS, PAIR_SHORT, pairs_table
+    from dynactivegs.eval.tables import PAIR_METRICS, short_label, win_counts
 
-    t = pairs_table(runs, reference)
-    if t is None:
-        return []
     lines = []
-    for m in t.header[2:]:
-        recs = [r for r in t.records if r["method"] == m]
-        each = ", ".join(f"{PAIR_SHORT[k]} {sum(r[f'beats_{k}'] for r in recs)}" for k in PAIR_METRICS)
-        lines.append(f"dagsbench: {m} beats {reference} on all of Acc, C.R. and PSNR in "
-                     f"{sum(r['beats_all'] for r in recs)} of {len(recs)} (scene, seed) pairs ({each}; wins.md)")
+    for m, (n_all, each, n) in win_counts(runs, reference).items():
+        per_metric = ", ".join(f"{short_label(k)} {c}" for k, c in zip(PAIR_METRICS, each))
+        lines.append(f"dagsbench: {m} beats {reference} on all of Acc, C.R. and PSNR in {n_all} of {n} "
+                     f"(scene, seed) pairs ({per_metric}; wins.md)")
     return lines
 
 

@@ -272,8 +272,11 @@ def planner_table(runs: Sequence[dict[str, Any]]) -> Table | None:
 
 # ---------------------------------------------------------------------------------------- pairs
 PAIR_METRICS = ("acc_cm", "cr_pct", "psnr_db")
-PAIR_SHORT = {"acc_cm": "Acc", "comp_cm": "Comp", "cr_pct": "C.R.", "psnr_db": "PSNR", "ssim": "SSIM",
-              "depth_l1_cm": "Depth L1", "observed_pct": "Obs.", "observed_view_pct": "Obs. views"}
+
+
+def short_label(key: str) -> str:
+    """A metric's label without its unit: "Acc", "C.R.", "PSNR", "Obs. views"."""
+    return METRIC_BY_KEY[key].label.split(" (")[0]
 
 
 def _beats(value: float | None, ref: float | None, higher: bool) -> bool:
@@ -281,6 +284,11 @@ def _beats(value: float | None, ref: float | None, higher: bool) -> bool:
     if value is None or ref is None:
         return False
     return value > ref if higher else value < ref
+
+
+def _wins(vals: Sequence[float | None], refs: Sequence[float | None], specs: Sequence[MetricSpec]) -> list[bool]:
+    """Per metric: whether ``vals`` beat ``refs`` on it (:func:`_beats`)."""
+    return [_beats(v, r, spec.higher_is_better) for v, r, spec in zip(vals, refs, specs)]
 
 
 def _signed(values: np.ndarray, digits: int) -> str:
@@ -314,6 +322,21 @@ def paired(runs: Sequence[dict[str, Any]], reference: str = "baseline", metrics:
     return out
 
 
+def win_counts(runs: Sequence[dict[str, Any]], reference: str = "baseline", metrics: Sequence[str] = PAIR_METRICS,
+               fraction: float = 1.0) -> dict[str, tuple[int, tuple[int, ...], int]]:
+    """Per method of :func:`paired`: (pairs won on every metric, pairs won on each metric, pairs)."""
+    return _counts(paired(runs, reference, metrics, fraction), [METRIC_BY_KEY[k] for k in metrics])
+
+
+def _counts(per: dict[str, dict[Pair, tuple[list[float | None], list[float | None]]]],
+            specs: Sequence[MetricSpec]) -> dict[str, tuple[int, tuple[int, ...], int]]:
+    out = {}
+    for m, got in per.items():
+        ws = [_wins(vals, refs, specs) for vals, refs in got.values()]
+        out[m] = (sum(all(w) for w in ws), tuple(sum(w[i] for w in ws) for i in range(len(specs))), len(ws))
+    return out
+
+
 def pairs_table(runs: Sequence[dict[str, Any]], reference: str = "baseline", metrics: Sequence[str] = PAIR_METRICS,
                 fraction: float = 1.0) -> Table | None:
     """Per (scene, seed) pair: which of ``metrics`` each method beats ``reference`` on, run against run.
@@ -329,7 +352,7 @@ def pairs_table(runs: Sequence[dict[str, Any]], reference: str = "baseline", met
     methods = list(per)
     pairs = sorted({pk for got in per.values() for pk in got}, key=lambda t: (t[1], t[0]))
     specs = [METRIC_BY_KEY[k] for k in metrics]
-    short = [PAIR_SHORT.get(spec.key, spec.key) for spec in specs]
+    short = [short_label(k) for k in metrics]
     rows, best, records = [], [], []
     for s, k in pairs:
         cells, flags = [], []
@@ -339,7 +362,7 @@ def pairs_table(runs: Sequence[dict[str, Any]], reference: str = "baseline", met
                 flags.append(False)
                 continue
             vals, refs = per[m][(s, k)]
-            w = [_beats(v, r, spec.higher_is_better) for v, r, spec in zip(vals, refs, specs)]
+            w = _wins(vals, refs, specs)
             cells.append("all" if all(w) else (", ".join(n for n, x in zip(short, w) if x) or "none"))
             flags.append(all(w))
             records.append({"method": m, "scene": s, "seed": k,
@@ -347,10 +370,10 @@ def pairs_table(runs: Sequence[dict[str, Any]], reference: str = "baseline", met
         rows.append((s, str(k), *cells))
         best.append((False, False, *flags))
     counts, means = [], []
+    won = _counts(per, specs)
     for m in methods:
-        ws = [[r[f"beats_{spec.key}"] for spec in specs] for r in records if r["method"] == m]
-        each = " / ".join(str(sum(w[i] for w in ws)) for i in range(len(specs)))
-        counts.append(f"{sum(all(w) for w in ws)} / {each} of {len(ws)}")
+        n_all, each, n = won[m]
+        counts.append(f"{n_all} / {' / '.join(map(str, each))} of {n}")
         d = [[v - r for v, r in zip(vals, refs)] for vals, refs in per[m].values()
              if all(x is not None for x in (*vals, *refs))]
         d_arr = np.asarray(d, dtype=np.float64).reshape(-1, len(specs))
@@ -486,7 +509,7 @@ def plot_wins(runs: Sequence[dict[str, Any]], path: Path, reference: str = "base
             for n, (vals, refs) in enumerate(got.values()):
                 if vals[i] is None or refs[i] is None:
                     continue
-                won = all(_beats(v, r, sp.higher_is_better) for v, r, sp in zip(vals, refs, specs))
+                won = all(_wins(vals, refs, specs))
                 x = j + 0.3 * ((n * 0.618) % 1.0 - 0.5)            # spread a method's pairs across its slot
                 pts.append((x, (vals[i] - refs[i]) * (1.0 if spec.higher_is_better else -1.0), j, won))
         size = np.abs([g for _, g, _, _ in pts]) if pts else np.zeros(1)
