@@ -229,6 +229,7 @@ def test_the_robot_does_not_push_into_a_person_standing_in_a_doorway():
 
 def test_bad_config_values_raise_config_error():
     for kw in ({"variant": "greedy"}, {"l_r": -1.0}, {"rebuild_every": 0}, {"local_threshold": math.inf},
+               {"local_share": 1.5}, {"local_share": -0.1}, {"local_share": math.nan},
                {"reach_yaw_deg": 0.0}, {"bump_give_up": -1}, {"bump_near_m": -0.5}):
         with pytest.raises(ConfigError):
             selection.SelectionConfig(**kw)
@@ -527,6 +528,34 @@ def test_with_global_beats_local_a_far_subregion_wins_only_with_a_better_view_th
     off, on = select(False, 1.0), select(True, 1.0)
     assert on.mode == off.mode == "global" and on.target_xy_m[0] > 8.0
     np.testing.assert_array_equal(on.target_xy_m, off.target_xy_m)
+
+
+def test_local_share_leaves_the_robots_subregion_while_its_best_view_is_far_below_the_best_anywhere():
+    free = four_rooms()                                              # the robot in C, RR richer
+    fo, mo = fields_for(free, [(3.5, 2.2, 5.5, 2.5, 4.0), (9.5, 0.5, 11.5, 2.5, 1.0)], [])
+
+    def select(share: float, threshold: float = 0.0) -> SelectionOut:
+        cfg = selection.SelectionConfig(local_share=share, local_threshold=threshold,
+                                        subregions=SubregionConfig(cut_distance=3.0))
+        return select_once(cfg, free, fo, mo, (4.5, 1.5))
+
+    def region_at(out: SelectionOut, xy) -> int:
+        return int(out.node_region[np.argmin(np.hypot(*(out.node_xy_m - np.asarray(xy)).T))])
+
+    base = select(0.0)
+    here = region_at(base, (4.5, 1.5))
+    in_c = np.array([region_at(base, base.node_xy_m[n]) == here for n in base.cand_node])
+    local_best, best = base.cand_score[in_c].max(), base.cand_score.max()
+    assert 0.3 * best < local_best < 0.5 * best                      # C's best view: 40 % of RR's
+    assert base.mode == "local" and region_at(base, base.target_xy_m) == here
+    np.testing.assert_array_equal(select(0.3).target_xy_m, base.target_xy_m)     # above the share: C still
+    leave = select(0.5)
+    assert leave.mode == "global" and region_at(leave, leave.target_xy_m) != here
+    np.testing.assert_array_equal(leave.cand_score, base.cand_score)             # the eq. (7) scores unchanged
+    # below local_threshold the robot leaves either way, and the share changes nothing
+    above = float(local_best) + 0.1
+    np.testing.assert_array_equal(select(0.5, above).target_xy_m, select(0.0, above).target_xy_m)
+    assert select(0.0, above).mode == "global"
 
 
 def test_without_the_subregion_rule_full_takes_the_best_view_anywhere_and_keeps_its_motion_terms():
