@@ -170,11 +170,11 @@ class SelectionConfig:
     4 apartment scenes x seeds 0-2, one machine, benchmarks/results/apartment-1000-selvariants/full_anywhere;
     Acc cm / C.R. % / PSNR dB, mean of 12): 2.76 / 90.9 / 23.24 against full's 2.89 / 92.1 / 23.70 and
     gain_cost's 2.57 / 92.8 / 24.28 (23.76 without apartment-00 seed 1, where it never entered the flat's
-    south half); full beat baseline on all three in 5 of the 12 pairs against 8. Again at the crowd rule (seeds
-    0-1, 8 pairs, benchmarks/results/apartment-1000-crowd/full_anywhere; off against on): 2.48 / 92.1 / 24.28
-    against 2.38 / 92.4 / 24.45, 3 pairs won against 2; the rule is what keeps full's early targets near (2.2
-    against 2.6 m in the first 250 steps, 13.2 against 16.4 m driven; Obs. at 25 % 52.5 against 55.9 %) and
-    its collisions up (27.5 against 19.4 per run), but the map was no better without it. On by default."""
+    south half); full beat baseline on all three in 5 of the 12 pairs against 8. Again at the crowd rule (the 12
+    pairs, benchmarks/results/apartment-1000-crowd/full_anywhere; off against on): 2.47 / 92.1 / 24.26 against
+    2.39 / 92.8 / 24.42, 4 pairs won either way; the rule is what keeps full's early targets near (2.7 against
+    2.3 m in the first 250 steps, 16.2 against 13.9 m driven; Obs. at 25 % 55.6 against 51.0 %) and its
+    collisions up (20.3 against 28.5 per run), but the map was no better without it. On by default."""
     l_d: float = 2.0
     """lambda_d of eq. (10): weight of the path length from the robot to a subregion (per metre)."""
     l_v: float = 5.0
