@@ -99,6 +99,11 @@ def state_on(cfg: selection.SelectionConfig, free: np.ndarray, target: selection
                                     (), base.scores, last_pose)
 
 
+def region_at(out: SelectionOut, xy) -> int:
+    """The subregion of the graph node nearest ``xy``."""
+    return int(out.node_region[np.argmin(np.hypot(*(out.node_xy_m - np.asarray(xy)).T))])
+
+
 def select_once(cfg: selection.SelectionConfig, free: np.ndarray, fo: FieldsOut, mo: MappingOut, xy) -> SelectionOut:
     state = state_on(cfg, free)
     rec = StepRecord(frame=blind_frame(*xy, 0.0), perception=PerceptionOut(np.full((H, W), 0.1, np.float32), 0.0, False),
@@ -514,9 +519,6 @@ def test_with_global_beats_local_a_far_subregion_wins_only_with_a_better_view_th
                                         subregions=SubregionConfig(cut_distance=3.0))
         return select_once(cfg, free, fo, mo, (4.5, 1.5))
 
-    def region_at(out: SelectionOut, xy) -> int:
-        return int(out.node_region[np.argmin(np.hypot(*(out.node_xy_m - np.asarray(xy)).T))])
-
     # little to see in RR: eq. (10) still leaves the robot's subregion, for views worse than its own best
     off, on = select(False, 0.1), select(True, 0.1)
     assert off.mode == "global" and region_at(off, off.target_xy_m) != region_at(off, (4.5, 1.5))
@@ -538,9 +540,6 @@ def test_local_share_leaves_the_robots_subregion_while_its_best_view_is_far_belo
         cfg = selection.SelectionConfig(local_share=share, local_threshold=threshold,
                                         subregions=SubregionConfig(cut_distance=3.0))
         return select_once(cfg, free, fo, mo, (4.5, 1.5))
-
-    def region_at(out: SelectionOut, xy) -> int:
-        return int(out.node_region[np.argmin(np.hypot(*(out.node_xy_m - np.asarray(xy)).T))])
 
     base = select(0.0)
     here = region_at(base, (4.5, 1.5))
