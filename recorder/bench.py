@@ -603,14 +603,16 @@ def run(args: argparse.Namespace) -> int:
 
 
 def pair_lines(runs: list[dict[str, Any]], reference: str = "baseline") -> list[str]:
-    """One line per method: the (scene, seed) pairs where it beats ``reference`` on Acc, C.R. and PSNR."""
-    from dynactivegs.eval.tables import PAIR_METRICS, short_label, win_counts
+    """One line per method: the (scene, seed) pairs where it beats ``reference`` on Acc, C.R. and PSNR, with the
+    exact 95 % interval of that share."""
+    from dynactivegs.eval.tables import PAIR_METRICS, short_label, win_counts, win_share_interval
 
     lines = []
     for m, (n_all, each, n) in win_counts(runs, reference).items():
         per_metric = ", ".join(f"{short_label(k)} {c}" for k, c in zip(PAIR_METRICS, each))
+        lo, hi = win_share_interval(n_all, n)
         lines.append(f"dagsbench: {m} beats {reference} on all of Acc, C.R. and PSNR in {n_all} of {n} "
-                     f"(scene, seed) pairs ({per_metric}; wins.md)")
+                     f"(scene, seed) pairs, 95 % CI {lo:.0f}-{hi:.0f} % ({per_metric}; wins.md)")
     return lines
 
 

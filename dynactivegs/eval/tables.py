@@ -22,7 +22,8 @@ config switches on (weighted mapping, selection variant, planner variant), not b
 name, so e.g. ``motion_view`` and ``plan_shortest`` (the same config) fill the same row.
 
 The pairs table puts each method against ``baseline`` run against run: on which of Acc, C.R. and PSNR it is
-better in each (scene, seed) pair, how many pairs it wins on all three, and the paired mean differences.
+better in each (scene, seed) pair, how many pairs it wins on all three (with the exact binomial 95 % interval of
+that share), the two-sided sign test per metric, and the paired mean differences.
 """
 
 from __future__ import annotations
@@ -337,14 +338,49 @@ def _counts(per: dict[str, dict[Pair, tuple[list[float | None], list[float | Non
     return out
 
 
+def win_share_interval(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
+    """The exact (Clopper-Pearson) ``level`` interval of the share of pairs won, k of n, in percent.
+
+    Pairs of one benchmark are taken as independent draws; the interval says which true shares of pairs won
+    are consistent with k of n (e.g. 4 of 12: 10-65 %)."""
+    from scipy.stats import binomtest
+
+    if n <= 0 or not 0 <= k <= n:
+        raise ValueError(f"win_share_interval needs 0 <= k <= n and n > 0, got k={k}, n={n}")
+    ci = binomtest(k, n).proportion_ci(confidence_level=level, method="exact")
+    return 100.0 * float(ci.low), 100.0 * float(ci.high)
+
+
+def sign_test_p(wins: int, losses: int) -> float | None:
+    """Two-sided sign test: the chance of a split at least as uneven as wins : losses if each pair were a fair
+    coin (ties and missing values are left out before). None without a decided pair."""
+    from scipy.stats import binomtest
+
+    if wins + losses == 0:
+        return None
+    return float(binomtest(wins, wins + losses, 0.5).pvalue)
+
+
+def _losses(per_method: dict[Pair, tuple[list[float | None], list[float | None]]],
+            specs: Sequence[MetricSpec]) -> tuple[int, ...]:
+    """Per metric: the pairs where the reference is strictly better (the method's wins with the roles swapped)."""
+    ls = [_wins(refs, vals, specs) for vals, refs in per_method.values()]
+    return tuple(sum(w[i] for w in ls) for i in range(len(specs)))
+
+
+def _p_text(p: float | None) -> str:
+    return "n/a" if p is None else (f"{p:.2g}" if p >= 0.001 else "< 0.001")
+
+
 def pairs_table(runs: Sequence[dict[str, Any]], reference: str = "baseline", metrics: Sequence[str] = PAIR_METRICS,
                 fraction: float = 1.0) -> Table | None:
     """Per (scene, seed) pair: which of ``metrics`` each method beats ``reference`` on, run against run.
 
     The closed loop spreads single runs widely, so a mean can hide that a method wins few pairs; this counts
     them. Rows: the pairs ``reference`` and at least one other method both ran, then per method the number of
-    pairs won on every metric and on each, and the paired mean difference (method - reference) +- its sample
-    std. A cell reads "all" (beats it on every metric, in bold), the short names of the metrics it beats it on,
+    pairs won on every metric and on each, the share won on every metric with its exact 95 % interval
+    (:func:`win_share_interval`), wins : losses and the sign test's p per metric (:func:`sign_test_p`), and the
+    paired mean difference (method - reference) +- its sample std. A cell reads "all" (beats it on every metric, in bold), the short names of the metrics it beats it on,
     "none", or "" (no such run). None when ``reference`` or any other method is missing."""
     per = paired(runs, reference, metrics, fraction)
     if not per:
@@ -369,22 +405,29 @@ def pairs_table(runs: Sequence[dict[str, Any]], reference: str = "baseline", met
                             **{f"beats_{spec.key}": x for spec, x in zip(specs, w)}, "beats_all": all(w)})
         rows.append((s, str(k), *cells))
         best.append((False, False, *flags))
-    counts, means = [], []
+    counts, shares, signs, means = [], [], [], []
     won = _counts(per, specs)
     for m in methods:
         n_all, each, n = won[m]
         counts.append(f"{n_all} / {' / '.join(map(str, each))} of {n}")
+        lo, hi = win_share_interval(n_all, n)
+        shares.append(f"{100.0 * n_all / n:.0f} % ({lo:.0f}-{hi:.0f} %)")
+        signs.append(" / ".join(f"{w}:{l} p {_p_text(sign_test_p(w, l))}" for w, l in zip(each, _losses(per[m], specs))))
         d = [[v - r for v, r in zip(vals, refs)] for vals, refs in per[m].values()
              if all(x is not None for x in (*vals, *refs))]
         d_arr = np.asarray(d, dtype=np.float64).reshape(-1, len(specs))
         means.append(" / ".join(_signed(d_arr[:, i], spec.digits) for i, spec in enumerate(specs)))
     rows.append(("pairs won", "all " + " / ".join(short), *counts))
+    rows.append(("won on all", "share (95 % CI)", *shares))
+    rows.append(("sign test", " / ".join(short), *signs))
     rows.append(("mean difference", " / ".join(short), *means))
-    best += [(False,) * (2 + len(methods))] * 2
+    best += [(False,) * (2 + len(methods))] * 4
     note = (f"Each method against `{reference}`, run against run on the same (scene, seed), metrics at "
             f"{fraction:.0%} of the budget; a win is a strictly better value (lower Acc, Comp, depth L1; higher "
-            f"C.R., PSNR, SSIM); \"all\" (bold): better on every metric. Mean difference: method - {reference}, "
-            f"± the sample std over the pairs.")
+            f"C.R., PSNR, SSIM); \"all\" (bold): better on every metric. Won on all: the share of pairs won on "
+            f"every metric, with its exact binomial 95 % interval. Sign test: pairs won : lost per metric (ties "
+            f"left out) and the two-sided p of so uneven a split if each pair were a coin toss. Mean difference: "
+            f"method - {reference}, ± the sample std over the pairs.")
     return Table(f"Pairs against {reference}", ("Scene", "Seed", *methods), tuple(rows), tuple(best),
                  tuple(records), note, n_lead=2)
 

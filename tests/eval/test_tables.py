@@ -127,25 +127,30 @@ def test_pairs_table_counts_wins_run_against_run():
     runs.append(fake_run("weighted", "a", 0, acc=4.0, cr=81.0, psnr=19.0))   # ties Acc: no win
     t = pairs_table(runs)
     assert t.header == ("Scene", "Seed", "weighted", "full")
-    by_pair = {(r[0], r[1]): r[2:] for r in t.rows[:-2]}
+    by_pair = {(r[0], r[1]): r[2:] for r in t.rows[:-4]}
     assert by_pair[("a", "0")] == ("C.R.", "all") and by_pair[("b", "0")] == ("", "C.R., PSNR")
     assert by_pair[("a", "2")] == ("", "all")
     assert [r[0] for r in t.rows[:6]] == ["a", "b", "a", "b", "a", "b"]                # ordered by seed, then scene
-    won = t.rows[-2]
+    won = t.rows[-4]
     assert won[:2] == ("pairs won", "all Acc / C.R. / PSNR") and won[2:] == ("0 / 0 / 1 / 0 of 1", "3 / 3 / 6 / 6 of 6")
+    # exact binomial 95 % intervals: 0 of 1 is 0-97.5 %, 3 of 6 is 11.8-88.2 %
+    assert t.rows[-3] == ("won on all", "share (95 % CI)", "0 % (0-98 %)", "50 % (12-88 %)")
+    # wins : losses per metric; weighted ties Acc (no decided pair), full loses Acc on b, and 6 : 0 is 2 / 2^6
+    assert t.rows[-2] == ("sign test", "Acc / C.R. / PSNR", "0:0 p n/a / 1:0 p 1 / 0:1 p 1",
+                          "3:3 p 1 / 6:0 p 0.031 / 6:0 p 0.031")
     diff = t.rows[-1]
     # full - baseline over the 6 pairs: Acc -2 on a, +2 on b; C.R. 10 / 12 / 14 on both; PSNR 5 on a, 2 on b
     assert diff[2:] == ("+0.00 / +1.0 / -1.00", "+0.00 ± 2.19 / +12.0 ± 1.8 / +3.50 ± 1.64")
-    assert [b[3] for b in t.best[:-2]] == [True, False] * 3 and not any(t.best[-1])
+    assert [b[3] for b in t.best[:-4]] == [True, False] * 3 and not any(any(b) for b in t.best[-4:])
     md = to_markdown(t)
     assert "| a | 0 | C.R. | **all** |" in md
     recs = list(csv.DictReader(io.StringIO(to_csv(t))))
     assert len(recs) == 7 and sum(r["beats_all"] == "True" for r in recs) == 3
     assert pair_lines(runs) == [
-        "dagsbench: weighted beats baseline on all of Acc, C.R. and PSNR in 0 of 1 (scene, seed) pairs "
-        "(Acc 0, C.R. 1, PSNR 0; wins.md)",
-        "dagsbench: full beats baseline on all of Acc, C.R. and PSNR in 3 of 6 (scene, seed) pairs "
-        "(Acc 3, C.R. 6, PSNR 6; wins.md)"]
+        "dagsbench: weighted beats baseline on all of Acc, C.R. and PSNR in 0 of 1 (scene, seed) pairs, 95 % CI "
+        "0-98 % (Acc 0, C.R. 1, PSNR 0; wins.md)",
+        "dagsbench: full beats baseline on all of Acc, C.R. and PSNR in 3 of 6 (scene, seed) pairs, 95 % CI "
+        "12-88 % (Acc 3, C.R. 6, PSNR 6; wins.md)"]
 
 
 def test_pairs_table_needs_the_reference_and_a_rival(tmp_path):
@@ -162,4 +167,22 @@ def test_pairs_table_needs_the_reference_and_a_rival(tmp_path):
     for c in r["checkpoints"]:
         c["psnr_db"] = None
     t = pairs_table([fake_run("baseline", "a", 0, acc=1, cr=50.0, psnr=20), r])
-    assert t.rows[0][2] == "Acc, C.R." and t.rows[-2][2] == "0 / 1 / 1 / 0 of 1"
+    assert t.rows[0][2] == "Acc, C.R." and t.rows[-4][2] == "0 / 1 / 1 / 0 of 1"
+    assert t.rows[-2][2] == "1:0 p 1 / 1:0 p 1 / 0:0 p n/a"
+
+
+def test_win_share_interval_and_sign_test_on_known_values():
+    # Clopper-Pearson: 0 of n has upper bound 1 - 0.025^(1/n), n of n lower bound 0.025^(1/n)
+    lo, hi = tables.win_share_interval(0, 12)
+    assert lo == 0.0 and abs(hi - 100 * (1 - 0.025 ** (1 / 12))) < 1e-9
+    lo, hi = tables.win_share_interval(12, 12)
+    assert abs(lo - 100 * 0.025 ** (1 / 12)) < 1e-9 and hi == 100.0
+    lo, hi = tables.win_share_interval(4, 12)
+    assert 9.9 < lo < 10.0 and 65.0 < hi < 65.2
+    # 80 % of 12 pairs won is 10; its interval reaches down to about half
+    assert tables.win_share_interval(10, 12)[0] < 55.0
+    # sign test, two-sided: 10 : 2 is 2 (1 + 12 + 66) / 2^12
+    assert abs(tables.sign_test_p(10, 2) - 2 * 79 / 4096) < 1e-12
+    assert tables.sign_test_p(6, 6) == 1.0 and tables.sign_test_p(0, 0) is None
+    with pytest.raises(ValueError, match="0 <= k <= n"):
+        tables.win_share_interval(3, 2)
