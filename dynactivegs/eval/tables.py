@@ -535,7 +535,8 @@ def plot_wins(runs: Sequence[dict[str, Any]], path: Path, reference: str = "base
     """Per metric of the pairs table, each method's gain over ``reference`` in every (scene, seed) pair, signed
     so that up is better (lower Acc: up); filled where the method wins the pair on all of them. The axis spans
     1.5 x the 90th percentile of the gains' size, so that one run far off does not squash the rest: points past
-    it sit on the edge as triangles with their value. None (nothing written) without pairs."""
+    it sit on the edge as triangles with their value. Under each method: its pairs won on all and the exact 95 %
+    interval of that share. None (nothing written) without pairs."""
     per = paired(runs, reference)
     if not per:
         return None
@@ -545,7 +546,11 @@ def plot_wins(runs: Sequence[dict[str, Any]], path: Path, reference: str = "base
     import matplotlib.pyplot as plt
 
     specs = [METRIC_BY_KEY[k] for k in PAIR_METRICS]
-    fig, axes = plt.subplots(1, len(specs), figsize=(4 * len(specs), 4))
+    ticks = []                                          # the method, its pairs won on all and that share's interval
+    for m, (n_all, _, n) in _counts(per, specs).items():
+        lo, hi = win_share_interval(n_all, n)
+        ticks.append(f"{m}\n{n_all} of {n} ({lo:.0f}-{hi:.0f} %)")
+    fig, axes = plt.subplots(1, len(specs), figsize=(4 * len(specs), 4.4))
     for i, (ax, spec) in enumerate(zip(axes, specs)):
         pts = []                                        # (x, gain, method index, won)
         for j, got in enumerate(per.values()):
@@ -567,10 +572,11 @@ def plot_wins(runs: Sequence[dict[str, Any]], path: Path, reference: str = "base
                             textcoords="offset points", fontsize=7)
         ax.set_ylim(-1.1 * lim, 1.1 * lim)
         ax.axhline(0.0, color="k", lw=0.8)
-        ax.set_xticks(range(len(per)), list(per), rotation=20)
+        ax.set_xticks(range(len(per)), ticks, rotation=20, fontsize=8)
         ax.set_ylabel(f"{spec.label}: gain over {reference}")
         ax.grid(alpha=0.3, axis="y")
-    fig.suptitle(f"Each (scene, seed) pair against {reference}: above 0 is better; filled: better on all three")
+    fig.suptitle(f"Each (scene, seed) pair against {reference}: above 0 is better; filled: better on all three "
+                 f"(under each: pairs won on all, 95 % CI)")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
