@@ -231,6 +231,7 @@ def _benchmark_module(name: str):
     path = Path(__file__).resolve().parents[2] / "benchmarks" / f"{name}.py"
     spec = importlib.util.spec_from_file_location(name, path)
     mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod                       # as an import would: dataclasses look their module up there
     spec.loader.exec_module(mod)
     return mod
 
@@ -471,3 +472,29 @@ def test_path_stats_correlates_path_traits_with_psnr_within_each_scene(tmp_path)
         mod.run_metrics(log)
     with pytest.raises(ValueError, match="no metrics file"):
         mod.run_metrics(tmp_path / "other.mcap")
+
+
+def test_choice_weights_gives_back_the_logged_choices(finished, capsys):
+    """benchmarks/choice_weights.py on the sweep's runs: the run's own eq. (7) weights pick every logged target
+    again; for baseline (gain + cost) the logged travel cost is the plain path length it rebuilds; bad
+    arguments are one line."""
+    out, _ = finished
+    mod = _benchmark_module("choice_weights")
+    logs = [out / "runs" / p / "tiny-00-seed0.mcap" for p in ("baseline", "full")]
+    for log in logs:
+        label, cfg, choices = mod.read_choices(log)
+        assert label.startswith(f"{log.parent.name} tiny-00 seed 0") and choices
+        own_l_r = cfg.selection.l_r if cfg.selection.variant == "full" else 0.0
+        assert mod.rescore(choices, own_l_r, cfg.selection.l_c, plain=False)["differ"] == 0
+        for c in choices:
+            assert c.pool[c.chosen] and np.all(c.dist_m[c.pool] >= 0.0)
+            if cfg.selection.variant == "gain_cost":
+                np.testing.assert_allclose(c.plain, c.cost, rtol=0, atol=1e-9)
+    assert mod.main([str(logs[1]), "--l-r", "0,30"]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[0].startswith("| run | choices | l_r | C |") and "30 (logged) | logged | 0 (0 %)" in printed[2]
+    assert len(printed) == 2 + 4                          # logged, then l_r 0 logged, l_r 0 and 30 plain
+    with pytest.raises(SystemExit, match="bad --l-r"):
+        mod.main([str(logs[0]), "--l-r", "0,x"])
+    with pytest.raises(SystemExit, match="error: .*missing.mcap"):
+        mod.main([str(out / "missing.mcap")])
