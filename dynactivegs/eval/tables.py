@@ -380,8 +380,9 @@ def pairs_table(runs: Sequence[dict[str, Any]], reference: str = "baseline", met
     them. Rows: the pairs ``reference`` and at least one other method both ran, then per method the number of
     pairs won on every metric and on each, the share won on every metric with its exact 95 % interval
     (:func:`win_share_interval`), wins : losses and the sign test's p per metric (:func:`sign_test_p`), and the
-    paired mean difference (method - reference) +- its sample std. A cell reads "all" (beats it on every metric, in bold), the short names of the metrics it beats it on,
-    "none", or "" (no such run). None when ``reference`` or any other method is missing."""
+    paired mean difference (method - reference) +- its sample std. A cell reads "all" (beats it on every
+    metric, in bold), the short names of the metrics it beats it on, "none", or "" (no such run). None when
+    ``reference`` or any other method is missing."""
     per = paired(runs, reference, metrics, fraction)
     if not per:
         return None
@@ -412,7 +413,8 @@ def pairs_table(runs: Sequence[dict[str, Any]], reference: str = "baseline", met
         counts.append(f"{n_all} / {' / '.join(map(str, each))} of {n}")
         lo, hi = win_share_interval(n_all, n)
         shares.append(f"{100.0 * n_all / n:.0f} % ({lo:.0f}-{hi:.0f} %)")
-        signs.append(" / ".join(f"{w}:{l} p {_p_text(sign_test_p(w, l))}" for w, l in zip(each, _losses(per[m], specs))))
+        lost = _losses(per[m], specs)
+        signs.append(" / ".join(f"{w}:{l} p {_p_text(sign_test_p(w, l))}" for w, l in zip(each, lost)))
         d = [[v - r for v, r in zip(vals, refs)] for vals, refs in per[m].values()
              if all(x is not None for x in (*vals, *refs))]
         d_arr = np.asarray(d, dtype=np.float64).reshape(-1, len(specs))
