@@ -73,9 +73,9 @@ def read_choices(mcap: Path) -> tuple[str, object, list[Choice]]:
         robot_xy = np.array([pose.x_m, pose.y_m])
         arrays = edge_list_arrays(len(s.node_xy_m), s.edges, s.edge_length_m)
         dist, _ = _path_lengths(arrays, nearest_clear_node(s.node_xy_m, robot_xy, s.node_leg_clear))
-        xy = s.node_xy_m[s.cand_node]
-        turn = np.array([_turning_rad(xy[i:i + 1], s.cand_yaw_rad[i:i + 1], robot_xy, pose.yaw_rad,
-                                      sel_cfg.reach_tol_m)[0, 0] for i in range(len(xy))])
+        ny = sel_cfg.visibility.n_yaws            # the candidates are every scored node x every yaw, node-major
+        turn = _turning_rad(s.node_xy_m[s.cand_node[::ny]], s.cand_yaw_rad[:ny], robot_xy, pose.yaw_rad,
+                            sel_cfg.reach_tol_m).ravel()
         out.append(Choice(st.step, pool, int(hit[0]), s.cand_gain, s.cand_risk, s.cand_cost,
                           dist[s.cand_node] + sel_cfg.turn_cost_m * turn, dist[s.cand_node]))
     label = f"{reader.metadata.get('preset', '?')} {cfg.sim.scene} seed {cfg.seed}"

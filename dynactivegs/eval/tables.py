@@ -364,8 +364,8 @@ def sign_test_p(wins: int, losses: int) -> float | None:
 def _losses(per_method: dict[Pair, tuple[list[float | None], list[float | None]]],
             specs: Sequence[MetricSpec]) -> tuple[int, ...]:
     """Per metric: the pairs where the reference is strictly better (the method's wins with the roles swapped)."""
-    ls = [_wins(refs, vals, specs) for vals, refs in per_method.values()]
-    return tuple(sum(w[i] for w in ls) for i in range(len(specs)))
+    swapped = {pair: (refs, vals) for pair, (vals, refs) in per_method.items()}
+    return _counts({"": swapped}, specs)[""][1]
 
 
 def _p_text(p: float | None) -> str:
