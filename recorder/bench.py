@@ -12,7 +12,7 @@ avoid the run's whole trajectory, so every checkpoint of a run is measured on th
 
 Layout of ``--out``::
 
-    runs/<preset>/<scene>-seed<k>.json    metrics at the checkpoints, coverage curve, timing, config
+    runs/<preset>/<scene>-seed<k>.json    metrics at the checkpoints, coverage curve, timing, config, machine
     runs/<preset>/<scene>-seed<k>.mcap    the run's log (dagsreplay reads it)
     main.md / main.csv                    methods x metrics, scenes + mean (best in bold)
     ablation_components.md/.csv           Table 3 layout (which components are on)
@@ -21,6 +21,8 @@ Layout of ``--out``::
     progress.png, coverage.png            PSNR and C.R. over steps; coverage over steps, per method
 
 A run whose metrics file exists is skipped, so an interrupted sweep resumes where it stopped.
+Each metrics file records the machine it was made on (:func:`recorder.mcap_log.machine_info`): the closed loop
+repeats bit for bit on one machine only, so a sweep that mixes machines is warned about.
 ``--reevaluate`` measures finished runs again from the map snapshots in their MCAP logs (the
 runs log the map at every checkpoint) with the current evaluation settings.
 Runs go to a local process pool (``--workers``) or to Ray tasks (``--ray ADDRESS``).
@@ -228,6 +230,7 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
     from dynactivegs.eval.metrics import SceneEvaluator
     from dynactivegs.eval.progress import CHECKPOINT_FRACTIONS, checkpoint_steps
     from dynactivegs.mapping.stage import refine_iters
+    from recorder.mcap_log import machine_info
 
     if torch_threads is not None:
         import torch
@@ -291,6 +294,7 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
         "seconds_eval": time.perf_counter() - t2,
         "seconds_setup": t_setup, "collisions": res.collisions,
         "mcap": spec.mcap_path.name if spec.mcap else None,
+        "machine": machine_info(),          # runs repeat bit for bit only on one machine id
     }
     tmp = spec.metrics_path.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(result, indent=1))
@@ -599,7 +603,22 @@ def run(args: argparse.Namespace) -> int:
         print(f"  {path}")
     for line in pair_lines(finished, args.wins_against):
         print(line)
+    line = machines_line(finished)
+    if line:
+        print(line)
     return 0
+
+
+def machines_line(runs: list[dict[str, Any]]) -> str | None:
+    """A warning when ``runs`` were made on more than one machine (their ``machine`` ids differ); else None."""
+    from dynactivegs.eval.tables import machines
+
+    ids = machines(runs)
+    if len(ids) < 2:
+        return None
+    each = ", ".join(f"{n} on {mid}" for mid, n in sorted(ids.items(), key=lambda t: -t[1]))
+    return (f"dagsbench: warning: these runs come from {len(ids)} machines ({each}); runs do not repeat across "
+            f"machines, so compare presets on the runs of one machine (wins.md counts the mixed pairs)")
 
 
 def pair_lines(runs: list[dict[str, Any]], reference: str = "baseline") -> list[str]:

@@ -19,6 +19,7 @@ whole step and raises a one-line :class:`~dynactivegs.errors.DagsError`.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import math
 import os
@@ -88,6 +89,71 @@ def package_versions() -> dict[str, str]:
         except importlib_metadata.PackageNotFoundError:
             pass
     return out
+
+
+MACHINE_PACKAGES = ("numpy", "scipy", "torch", "numba", "llvmlite", "embreex", "trimesh", "networkx", "kornia",
+                    "opencv-python-headless", "gsplat")
+"""The numeric libraries whose versions go into :func:`machine_info`'s ``id``."""
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or "unknown"
+
+
+def machine_info() -> dict[str, str]:
+    """What a run's bits depend on besides the code, the config and the seed (all strings).
+
+    ``cpu`` (model name), ``isa`` (the instruction set torch's CPU kernels dispatch to: AVX2, AVX512, ...),
+    ``llvm_cpu`` (the CPU numba compiles its kernels for), ``cores`` (not part of the id: the kernels' results do
+    not depend on the thread count), and ``id``, a short hash of cpu, isa, llvm_cpu, Python's and
+    :data:`MACHINE_PACKAGES`' versions. A closed loop turns a last-bit difference in a float reduction into a
+    different run, so runs repeat bit for bit only where ``id`` is the same (DESIGN.md §3); runs with different
+    ids are draws of the closed loop, not repeats."""
+    try:
+        import torch
+
+        isa = str(torch.backends.cpu.get_cpu_capability())
+    except Exception:                           # noqa: BLE001 - an old torch or none: the id still says so
+        isa = "unknown"
+    try:
+        import numba
+        import llvmlite.binding as llvm
+
+        llvm_cpu = numba.config.CPU_NAME or llvm.get_host_cpu_name()
+    except Exception:                           # noqa: BLE001
+        llvm_cpu = "unknown"
+    info = {"cpu": _cpu_model(), "isa": isa, "llvm_cpu": str(llvm_cpu), "cores": str(os.cpu_count() or 0)}
+    versions = {"python": platform.python_version()}
+    for name in MACHINE_PACKAGES:
+        try:
+            versions[name] = importlib_metadata.version(name)
+        except importlib_metadata.PackageNotFoundError:
+            pass
+    return {**info, "id": machine_id(info, versions)}
+
+
+def machine_id(info: Mapping[str, str], versions: Mapping[str, str]) -> str:
+    """10 hex digits over ``info``'s cpu, isa and llvm_cpu and every version in ``versions``."""
+    key = json.dumps({"cpu": info.get("cpu"), "isa": info.get("isa"), "llvm_cpu": info.get("llvm_cpu"),
+                      "versions": dict(sorted(versions.items()))}, sort_keys=True)
+    return hashlib.sha256(key.encode()).hexdigest()[:10]
+
+
+def machine_difference(logged: Mapping[str, str], here: Mapping[str, str]) -> str | None:
+    """How the machine a log or run was made on differs from ``here`` (both as :func:`machine_info` gives them,
+    the log's read from its ``machine.*`` metadata): e.g. "isa AVX2 there, AVX512 here"; "libraries' versions"
+    when only the id differs; None when the ids agree or the log has none (written before they were recorded)."""
+    if not logged.get("id") or logged.get("id") == here.get("id"):
+        return None
+    parts = [f"{k} {logged.get(k, '?')} there, {here.get(k, '?')} here" for k in ("cpu", "isa", "llvm_cpu")
+             if logged.get(k) != here.get(k)]
+    return "; ".join(parts) or "the numeric libraries' versions differ"
 
 
 def _jsonable(v: Any) -> Any:
@@ -182,7 +248,8 @@ class LogWriter:
             raise DagsError(f"cannot create log {self.path}: {e.strerror or e}") from None
         self._mcap = Writer(self._file, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)  # type: ignore[arg-type]
         meta = {**metadata, "schema_version": str(SCHEMA_VERSION), "message_encoding": MESSAGE_ENCODING,
-                **{f"version.{k}": v for k, v in package_versions().items()}}
+                **{f"version.{k}": v for k, v in package_versions().items()},
+                **{f"machine.{k}": v for k, v in machine_info().items()}}
         self._io(lambda: (self._mcap.start(library=f"dynactivegs/{meta.get('version.dynactivegs', '?')}"),
                           self._mcap.add_metadata(METADATA_NAME, meta)))
         self._good_offset = self._file.tell()

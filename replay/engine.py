@@ -43,7 +43,7 @@ from dynactivegs.config import DagsConfig, config_from_json, with_overrides
 from dynactivegs.errors import DagsError
 from dynactivegs.records import MappingOut, StepRecord
 from recorder.live import DEFAULT_MAP_EVERY, known_area_m2, occupancy_of, refine_with_bar, wants_map
-from recorder.mcap_log import MAP_TOPIC, REFINED_MAP_TOPIC, STAGE_TOPICS
+from recorder.mcap_log import MAP_TOPIC, REFINED_MAP_TOPIC, STAGE_TOPICS, machine_difference, machine_info
 from replay.source import LogEnd, LoggedStep, LogReader
 
 
@@ -230,7 +230,7 @@ def replay(path: str | Path, *, from_stage: str = "perception", from_step: int =
 
         meta = {k: v for k, v in reader.metadata.items() if k not in ("config", "seed", "schema_version",
                                                                          "message_encoding") and
-                not k.startswith("version.")}
+                not k.startswith(("version.", "machine."))}
         writer = LogWriter(record, run_metadata(cfg, cfg.seed, **meta, replayed_from=str(reader.path),
                                                 replayed_from_stage=from_stage, overrides=" ".join(overrides)))
     if rrd is not None:
@@ -373,6 +373,13 @@ def _log_rerun(sink: Any, ls: LoggedStep, out: StepRecord, states: list[object],
                   metrics=metrics.values if metrics is not None and first_stage > 1 else None)
 
 
+def logged_on_other_machine(metadata: dict[str, str]) -> str | None:
+    """How the machine in a log's ``machine.*`` metadata differs from this one; None if it is this one (or the
+    log is older than that metadata)."""
+    logged = {k.removeprefix("machine."): v for k, v in metadata.items() if k.startswith("machine.")}
+    return machine_difference(logged, machine_info())
+
+
 def _report(res: ReplayResult, reader: LogReader, from_step: int, overrides: list[str], logged_cfg: DagsConfig,
             say: Callable[[str], None], record: Any, rrd: Any) -> None:
     end = reader.end
@@ -385,6 +392,10 @@ def _report(res: ReplayResult, reader: LogReader, from_step: int, overrides: lis
             say(f"  {line}")
     elif res.first_difference is not None:
         say(f"replay of {res.from_stage} and after differs from the log at {res.first_difference.describe()}")
+        other = logged_on_other_machine(reader.metadata)
+        if other:
+            say(f"note: the log was recorded on another machine ({other}); the stages repeat bit for bit on one "
+                f"machine only, so replay it where it was recorded to look for a real change")
     else:
         topics = ", ".join(STAGE_TOPICS[s.name] for s in pipeline.STAGES[pipeline.stage_index(res.from_stage):])
         if res.refined_checked:

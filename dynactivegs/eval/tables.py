@@ -368,6 +368,26 @@ def _losses(per_method: dict[Pair, tuple[list[float | None], list[float | None]]
     return _counts({"": swapped}, specs)[""][1]
 
 
+def machines(runs: Iterable[dict[str, Any]]) -> dict[str, int]:
+    """Runs per machine id (the ``machine`` entry ``dagsbench`` records; runs without one are left out)."""
+    out: dict[str, int] = {}
+    for r in runs:
+        mid = (r.get("machine") or {}).get("id")
+        if mid:
+            out[mid] = out.get(mid, 0) + 1
+    return out
+
+
+def cross_machine_pairs(runs: Sequence[dict[str, Any]], reference: str = "baseline") -> tuple[int, int]:
+    """(comparisons of :func:`paired` whose two runs carry different machine ids, all its comparisons)."""
+    runs = _dedupe(runs, lambda r: r["preset"])
+    by = {(r["preset"], r["scene"], r["seed"]): (r.get("machine") or {}).get("id") for r in runs}
+    per = paired(runs, reference, PAIR_METRICS[:1])
+    mixed = sum(1 for m, got in per.items() for s, k in got
+                if by[(m, s, k)] and by[(reference, s, k)] and by[(m, s, k)] != by[(reference, s, k)])
+    return mixed, sum(len(got) for got in per.values())
+
+
 def _p_text(p: float | None) -> str:
     return "n/a" if p is None else (f"{p:.2g}" if p >= 0.001 else "< 0.001")
 
@@ -430,6 +450,11 @@ def pairs_table(runs: Sequence[dict[str, Any]], reference: str = "baseline", met
             f"every metric, with its exact binomial 95 % interval. Sign test: pairs won : lost per metric (ties "
             f"left out) and the two-sided p of so uneven a split if each pair were a coin toss. Mean difference: "
             f"method - {reference}, ± the sample std over the pairs.")
+    mixed, n_cmp = cross_machine_pairs(runs, reference)
+    if mixed:
+        note += (f" {mixed} of these {n_cmp} comparisons put runs made on different machines against each other "
+                 f"(their machine ids differ): runs do not repeat across machines, so such a pair compares two "
+                 f"draws of the closed loop, not the methods alone.")
     return Table(f"Pairs against {reference}", ("Scene", "Seed", *methods), tuple(rows), tuple(best),
                  tuple(records), note, n_lead=2)
 

@@ -15,6 +15,7 @@ import pytest
 
 from dynactivegs.eval.progress import checkpoint_steps
 from recorder import bench
+from recorder.mcap_log import machine_difference, machine_id, machine_info
 
 TINY = ["--suite", "tiny-00", "--seeds", "0", "--steps", "6", "--no-progress",
         "--set", "sim.camera.width_px=64", "sim.camera.height_px=40", "eval.n_gt_points=5000", "eval.n_views=4",
@@ -61,6 +62,7 @@ def test_runs_write_metrics_at_every_checkpoint_and_a_log(finished):
         assert 0.0 < views[0] and views == sorted(views) and views[-1] <= 100.0
         assert "observed_view_pct" in r["observed_note"]
         assert r["config"]["sim"]["camera"]["width_px"] == 64
+        assert r["machine"] == machine_info() and len(r["machine"]["id"]) == 10
         assert r["config"]["mapping"]["weighted"] is (p == "full")
         log = out / "runs" / p / "tiny-00-seed0.mcap"
         assert r["mcap"] == log.name and log.stat().st_size > 0
@@ -76,6 +78,8 @@ def test_log_replays_as_whole_steps(finished):
     reader = LogReader(out / "runs" / "full" / "tiny-00-seed0.mcap")
     assert [s.step for s in reader.steps()] == list(range(6))
     assert reader.metadata["preset"] == "full" and reader.metadata["steps_requested"] == "6"
+    assert {k: v for k, v in reader.metadata.items() if k.startswith("machine.")} == {
+        f"machine.{k}": v for k, v in machine_info().items()}
     last = json.loads((out / "runs" / "full" / "tiny-00-seed0.json").read_text())["checkpoints"][-1]
     assert len(reader.refined_map()) == last["n_gaussians"]
 
@@ -498,3 +502,36 @@ def test_choice_weights_gives_back_the_logged_choices(finished, capsys):
         mod.main([str(logs[0]), "--l-r", "0,x"])
     with pytest.raises(SystemExit, match="error: .*missing.mcap"):
         mod.main([str(out / "missing.mcap")])
+
+
+def test_machine_id_follows_the_cpu_and_the_libraries():
+    info = {"cpu": "AMD EPYC", "isa": "AVX512", "llvm_cpu": "znver4", "cores": "2"}
+    versions = {"python": "3.12.1", "torch": "2.13.0", "numpy": "2.4.6"}
+    mid = machine_id(info, versions)
+    assert len(mid) == 10 and mid == machine_id({**info, "cores": "64"}, dict(reversed(versions.items())))
+    others = (machine_id({**info, "isa": "AVX2"}, versions), machine_id({**info, "llvm_cpu": "znver3"}, versions),
+              machine_id(info, {**versions, "torch": "2.12.0"}))
+    assert len({mid, *others}) == 4
+    here = {**info, "id": mid}
+    assert machine_difference(here, here) is None
+    assert machine_difference({}, here) is None                         # a log older than the machine metadata
+    assert machine_difference({**info, "isa": "AVX2", "llvm_cpu": "znver3", "id": "x"}, here) == (
+        "isa AVX2 there, AVX512 here; llvm_cpu znver3 there, znver4 here")
+    assert machine_difference({**info, "id": "x"}, here) == "the numeric libraries' versions differ"
+
+
+def test_runs_from_two_machines_are_warned_about_and_counted_in_wins():
+    from dynactivegs.eval.tables import cross_machine_pairs, machines, pairs_table
+    from tests.eval.test_tables import fake_run
+
+    runs = [fake_run(p, s, 0, acc=1.0, cr=50.0, psnr=20.0) for p in ("baseline", "full") for s in ("a", "b")]
+    assert bench.machines_line(runs) is None and machines(runs) == {}     # files from before the machine entry
+    for r in runs:
+        r["machine"] = {"id": "m1"}
+    assert bench.machines_line(runs) is None and cross_machine_pairs(runs) == (0, 2)
+    assert "different machines" not in pairs_table(runs).note
+    runs[3]["machine"] = {"id": "m2"}                                     # full on scene b made elsewhere
+    assert machines(runs) == {"m1": 3, "m2": 1} and cross_machine_pairs(runs) == (1, 2)
+    assert bench.machines_line(runs).startswith(
+        "dagsbench: warning: these runs come from 2 machines (3 on m1, 1 on m2)")
+    assert "1 of these 2 comparisons put runs made on different machines" in pairs_table(runs).note

@@ -172,6 +172,20 @@ def test_tampered_output_fails_with_its_step_and_topic(recorded, capsys, tmp_pat
     rc, out, err = replay(capsys, bad, "--from-stage", stage)
     assert rc == 1, out + err
     assert "step 4, topic /planning, field action, max abs diff" in out, out
+    assert "another machine" not in out                     # recorded here
+
+
+def test_a_difference_in_a_log_from_another_machine_says_so(recorded, capsys, tmp_path, monkeypatch):
+    import replay.engine as engine
+
+    bad = tmp_path / "tampered.mcap"
+    _tamper(recorded["log"], bad, step=4)
+    here = engine.machine_info()
+    assert LogReader(bad).metadata["machine.id"] == here["id"]
+    monkeypatch.setattr(engine, "machine_info", lambda: {**here, "isa": "AVX9", "id": "0123456789"})
+    rc, out, err = replay(capsys, bad, "--from-stage", "planning")
+    assert rc == 1, out + err
+    assert f"recorded on another machine (isa {here['isa']} there, AVX9 here)" in out, out
 
 
 def test_replayed_run_can_be_recorded_and_viewed(recorded, capsys, tmp_path):
