@@ -535,3 +535,46 @@ def test_runs_from_two_machines_are_warned_about_and_counted_in_wins():
     assert bench.machines_line(runs).startswith(
         "dagsbench: warning: these runs come from 2 machines (3 on m1, 1 on m2)")
     assert "1 of these 2 comparisons put runs made on different machines" in pairs_table(runs).note
+
+
+def test_compare_runs_sets_the_same_runs_side_by_side(tmp_path, capsys):
+    """benchmarks/compare_runs.py on two constructed results folders: per-run differences, which runs share a
+    machine, and whether each pair's outcome against baseline is the same in both."""
+    from tests.eval.test_tables import fake_run
+
+    mod = _benchmark_module("compare_runs")
+    values = {"a": {("baseline", "s0"): (3.0, 90.0, 23.0), ("full", "s0"): (2.0, 91.0, 24.0),
+                    ("baseline", "s1"): (3.0, 90.0, 23.0), ("full", "s1"): (2.0, 89.0, 24.0)},
+              "b": {("baseline", "s0"): (3.0, 92.0, 23.5), ("full", "s0"): (2.5, 91.0, 24.0),   # loses C.R. in B
+                    ("baseline", "s1"): (3.0, 90.0, 23.0), ("full", "s1"): (2.0, 89.0, 24.0)}}
+    for folder, runs in values.items():
+        for (p, s), (acc, cr, psnr) in runs.items():
+            r = fake_run(p, s, 0, acc=acc, cr=cr, psnr=psnr)
+            r["machine"] = {"id": "m1" if folder == "a" or s == "s1" else "m2"}
+            d = tmp_path / folder / ("runs" if p == "baseline" else f"{p}/runs") / p   # both layouts
+            d.mkdir(parents=True, exist_ok=True)
+            (d / f"{s}-seed0.json").write_text(json.dumps(r))
+    only_a = fake_run("weighted", "s0", 0, acc=1.0, cr=1.0, psnr=1.0)
+    (tmp_path / "a" / "runs" / "weighted").mkdir()
+    (tmp_path / "a" / "runs" / "weighted" / "s0-seed0.json").write_text(json.dumps(only_a))
+    png = tmp_path / "ab.png"
+    assert mod.main([str(tmp_path / "a"), str(tmp_path / "b"), "--png", str(png)]) == 0
+    out = capsys.readouterr().out
+    assert "| baseline | s0 | 0 | 3.00 / 90.0 / 23.00 | 3.00 / 92.0 / 23.50 | +0.00 / +2.0 / +0.50 | no |" in out
+    assert "| full | s1 | 0 | 2.00 / 89.0 / 24.00 | 2.00 / 89.0 / 24.00 | +0.00 / +0.0 / +0.00 | yes |" in out
+    assert "Mean |B - A| over 4 runs (Acc / C.R. / PSNR): 0.12 / 0.5 / 0.12" in out
+    assert "| full | s0 | 0 | all | Acc, PSNR | no |" in out
+    assert "| full | s1 | 0 | Acc, PSNR | Acc, PSNR | yes |" in out
+    assert ("full: beats baseline on all three in 1 of 2 pairs in A, 0 in B; the outcome agrees in 1 of 2 "
+            "(per metric: Acc 2, C.R. 1, PSNR 2)") in out
+    assert "weighted" not in out                                          # only in A
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    # a config that differs leaves the run out; an option only one side has does not
+    cfg = mod.config_difference({"m": {"x": 1, "new": 0}}, {"m": {"x": 1}})
+    assert cfg == [] and mod.config_difference({"m": {"x": 1}}, {"m": {"x": 2}}) == ["m.x"]
+    # bad input: one line, exit 2
+    assert mod.main([str(tmp_path / "a"), str(tmp_path / "nowhere")]) == 2
+    assert "no such results folder" in capsys.readouterr().err
+    (tmp_path / "b" / "runs" / "baseline" / "s1-seed0.json").write_text("{\"preset\": ")
+    assert mod.main([str(tmp_path / "a"), str(tmp_path / "b")]) == 2
+    assert "not a dagsbench metrics file" in capsys.readouterr().err
