@@ -80,10 +80,11 @@ VERSIONED_PACKAGES = ("dynactivegs", "numpy", "scipy", "torch", "mcap", "msgpack
                       "gsplat", "trimesh", "networkx")
 
 
-def package_versions() -> dict[str, str]:
-    """Installed versions of the packages a run's results depend on (missing ones are left out)."""
+def package_versions(names: tuple[str, ...] = VERSIONED_PACKAGES) -> dict[str, str]:
+    """Installed versions of Python and of ``names``, by default the packages a run's results depend on (missing
+    ones are left out)."""
     out = {"python": platform.python_version()}
-    for name in VERSIONED_PACKAGES:
+    for name in names:
         try:
             out[name] = importlib_metadata.version(name)
         except importlib_metadata.PackageNotFoundError:
@@ -129,13 +130,7 @@ def machine_info() -> dict[str, str]:
     except Exception:                           # noqa: BLE001
         llvm_cpu = "unknown"
     info = {"cpu": _cpu_model(), "isa": isa, "llvm_cpu": str(llvm_cpu), "cores": str(os.cpu_count() or 0)}
-    versions = {"python": platform.python_version()}
-    for name in MACHINE_PACKAGES:
-        try:
-            versions[name] = importlib_metadata.version(name)
-        except importlib_metadata.PackageNotFoundError:
-            pass
-    return {**info, "id": machine_id(info, versions)}
+    return {**info, "id": machine_id(info, package_versions(MACHINE_PACKAGES))}
 
 
 def machine_id(info: Mapping[str, str], versions: Mapping[str, str]) -> str:
