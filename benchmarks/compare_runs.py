@@ -35,6 +35,7 @@ from dynactivegs.errors import DagsError  # noqa: E402
 from dynactivegs.eval.tables import (  # noqa: E402
     METRIC_BY_KEY, PAIR_METRICS, PRESET_ORDER, _ordered, _wins, short_label,
 )
+from recorder.bench import config_difference  # noqa: E402
 
 Key = tuple[str, str, int]                          # (preset, scene, seed)
 
@@ -68,22 +69,6 @@ def _values(run: dict[str, Any]) -> tuple[float | None, ...]:
 
 def _machine(run: dict[str, Any]) -> str | None:
     return (run.get("machine") or {}).get("id")
-
-
-def _flat(d: Any, prefix: str = "") -> dict[str, Any]:
-    if not isinstance(d, dict):
-        return {prefix: d}
-    out: dict[str, Any] = {}
-    for k, v in d.items():
-        out.update(_flat(v, f"{prefix}.{k}" if prefix else str(k)))
-    return out
-
-
-def config_difference(ca: dict[str, Any], cb: dict[str, Any]) -> list[str]:
-    """The config keys both runs have with different values. A key only one has is an option added between
-    the two versions of the code, whose default keeps the behaviour before, so it is not counted."""
-    fa, fb = _flat(ca), _flat(cb)
-    return sorted(k for k in fa.keys() & fb.keys() if fa[k] != fb[k])
 
 
 def common_runs(a: dict[Key, dict[str, Any]], b: dict[Key, dict[str, Any]]

@@ -140,14 +140,48 @@ def plan_runs(presets: list[str], scenes: list[str], seeds: list[int], steps: in
     return specs
 
 
+def _flat(d: Any, prefix: str = "") -> dict[str, Any]:
+    if not isinstance(d, dict):
+        return {prefix: d}
+    out: dict[str, Any] = {}
+    for k, v in d.items():
+        out.update(_flat(v, f"{prefix}.{k}" if prefix else str(k)))
+    return out
+
+
+def config_difference(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
+    """The keys (dotted) two configs as JSON both have with different values. A key only one has is an option
+    added between the two versions of the code; options come with a default that keeps the behaviour before
+    them, so such a key is no difference."""
+    fa, fb = _flat(a), _flat(b)
+    return sorted(k for k in fa.keys() & fb.keys() if fa[k] != fb[k])
+
+
 def check_finished(spec: RunSpec) -> bool:
-    """True when the run's metrics file exists; a one-line error when it was made with other settings."""
+    """True when the run's metrics file exists; a one-line error when it was made with other settings (steps, or
+    a config value: :func:`config_difference`)."""
     if not spec.metrics_path.is_file():
         return False
     done = json.loads(spec.metrics_path.read_text())
-    if done.get("steps") != spec.steps or done.get("config") != json.loads(to_json(spec.config())):
-        raise DagsError(f"{spec.metrics_path} was run with other settings (steps or config); use another --out")
+    if done.get("steps") != spec.steps:
+        raise DagsError(f"{spec.metrics_path} was run with {done.get('steps')} steps, not {spec.steps}; "
+                        f"use another --out")
+    differ = config_difference(done.get("config") or {}, json.loads(to_json(spec.config())))
+    if differ:
+        shown = ", ".join(differ[:3]) + (f" and {len(differ) - 3} more" if len(differ) > 3 else "")
+        raise DagsError(f"{spec.metrics_path} was run with other settings ({shown}); use another --out")
     return True
+
+
+def other_machine_line(finished: list[dict[str, Any]], here: str) -> str | None:
+    """A warning when some of the ``finished`` runs a sweep resumes were made on another machine than ``here``
+    (a machine id); else None."""
+    other = [r for r in finished if (r.get("machine") or {}).get("id") not in (None, here)]
+    if not other:
+        return None
+    return (f"dagsbench: warning: {len(other)} of the {len(finished)} finished runs in this folder were made on "
+            f"another machine than this one ({here}); runs do not repeat across machines, so the new runs will "
+            f"not pair with them as runs of one machine do (use another --out to keep machines apart)")
 
 
 # ---------------------------------------------------------------------------------------- one run
@@ -506,6 +540,12 @@ def sweep(specs: list[RunSpec], *, workers: int = 1, ray_address: str | None = N
     results: list[dict[str, Any]] = []
     if not todo:
         return skipped, results
+    if skipped:
+        from recorder.mcap_log import machine_info
+
+        line = other_machine_line([json.loads(sp.metrics_path.read_text()) for sp in skipped], machine_info()["id"])
+        if line:
+            print(line, flush=True)
     from tqdm import tqdm
 
     if not ray_address and workers > 1:

@@ -117,7 +117,30 @@ def test_resume_refuses_other_settings(finished, capsys):
     out, cache = finished
     assert bench.main(tiny_args(out, cache, "full", "mapping.weighted=false")) == 2
     err = capsys.readouterr().err
-    assert err.startswith("dagsbench: error:") and "other settings" in err and err.count("\n") == 1
+    assert err.startswith("dagsbench: error:") and "other settings (mapping.weighted)" in err and err.count("\n") == 1
+
+
+def test_resume_takes_runs_from_before_an_option_and_warns_of_another_machine(finished, tmp_path, capsys):
+    """A finished run whose config lacks an option added since (its default keeps the behaviour before) is
+    still finished; resuming a folder whose runs were made on another machine says so before running."""
+    out, cache = finished
+    copy = tmp_path / "copy"
+    shutil.copytree(out / "runs", copy / "runs", ignore=shutil.ignore_patterns("*.mcap"))
+    f = copy / "runs" / "baseline" / "tiny-00-seed0.json"
+    r = json.loads(f.read_text())
+    del r["config"]["selection"]["local_share"]
+    r["machine"] = {**r["machine"], "id": "elsewhere0"}
+    f.write_text(json.dumps(r))
+    (copy / "runs" / "full" / "tiny-00-seed0.json").unlink()
+    assert bench.main(tiny_args(copy, cache, "baseline,full", "--no-mcap")) == 0
+    printed = capsys.readouterr().out
+    assert "1 run in" in printed and "1 already finished (skipped)" in printed
+    assert (f"dagsbench: warning: 1 of the 1 finished runs in this folder were made on another machine than this "
+            f"one ({machine_info()['id']})") in printed
+    assert "dagsbench: warning: these runs come from 2 machines (1 on " in printed
+    assert "1 of these 1 comparisons put runs made on different machines" in (copy / "wins.md").read_text()
+    assert bench.other_machine_line([r], r["machine"]["id"]) is None
+    assert bench.other_machine_line([{"preset": "full"}], "x") is None     # a run from before the machine entry
 
 
 def test_reevaluate_measures_finished_runs_again_from_their_logs(finished, tmp_path, capsys):
