@@ -2,8 +2,8 @@
 
     python benchmarks/compare_runs.py RESULTS_A RESULTS_B [--reference baseline] [--png both.png]
 
-A run is a (preset, scene, seed) with its config; ``dagsbench`` writes one metrics file per run under
-``runs/<preset>/``. This reads every metrics file under each folder (``runs/`` at any depth, so a results
+A run is a (preset, scene, seed) with its config (a preset with ``--set`` overrides counts as a preset of its
+own); ``dagsbench`` writes one metrics file per run under ``runs/<preset>/``. This reads every metrics file under each folder (``runs/`` at any depth, so a results
 folder with preset subfolders works too), keeps the runs found in both with the same steps and config, and
 prints two Markdown tables:
 
@@ -37,7 +37,12 @@ from dynactivegs.eval.tables import (  # noqa: E402
 )
 from recorder.bench import config_difference  # noqa: E402
 
-Key = tuple[str, str, int]                          # (preset, scene, seed)
+Key = tuple[str, str, int]                          # (preset and its overrides, scene, seed)
+
+
+def label(run: dict[str, Any]) -> str:
+    """The run's preset, with its ``--set`` overrides if any (variants of one preset kept apart)."""
+    return " ".join([str(run["preset"]), *map(str, run.get("overrides") or ())])
 
 
 def load_folder(folder: Path) -> dict[Key, dict[str, Any]]:
@@ -50,7 +55,7 @@ def load_folder(folder: Path) -> dict[Key, dict[str, Any]]:
     for p in sorted(folder.rglob("runs/**/*.json")):
         try:
             r = json.loads(p.read_text())
-            key = (str(r["preset"]), str(r["scene"]), int(r["seed"]))
+            key = (label(r), str(r["scene"]), int(r["seed"]))
             r["checkpoints"][-1]
         except (json.JSONDecodeError, KeyError, IndexError, TypeError, ValueError):
             raise DagsError(f"{p}: not a dagsbench metrics file (or a truncated one); remove it or re-run it") from None
