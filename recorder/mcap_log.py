@@ -111,11 +111,11 @@ def machine_info() -> dict[str, str]:
     """What a run's bits depend on besides the code, the config and the seed (all strings).
 
     ``cpu`` (model name), ``isa`` (the instruction set torch's CPU kernels dispatch to: AVX2, AVX512, ...),
-    ``llvm_cpu`` (the CPU numba compiles its kernels for), ``cores`` (not part of the id: the kernels' results do
-    not depend on the thread count), and ``id``, a short hash of cpu, isa, llvm_cpu, Python's and
-    :data:`MACHINE_PACKAGES`' versions. A closed loop turns a last-bit difference in a float reduction into a
-    different run, so runs repeat bit for bit only where ``id`` is the same (DESIGN.md §3); runs with different
-    ids are draws of the closed loop, not repeats."""
+    ``llvm_cpu`` (the CPU numba compiles its kernels for), ``cores`` (recorded, not part of the id: the
+    rasteriser's kernels give the same bits on any thread count), and ``id``, a short hash of cpu, isa,
+    llvm_cpu, Python's and :data:`MACHINE_PACKAGES`' versions. A closed loop turns a last-bit difference in a
+    float reduction into a different run, so runs repeat bit for bit only where ``id`` is the same (DESIGN.md
+    §3); runs with different ids are draws of the closed loop, not repeats."""
     try:
         import torch
 
