@@ -3,9 +3,9 @@
     python benchmarks/compare_runs.py RESULTS_A RESULTS_B [--reference baseline] [--png both.png]
 
 A run is a (preset, scene, seed) with its config (a preset with ``--set`` overrides counts as a preset of its
-own); ``dagsbench`` writes one metrics file per run under ``runs/<preset>/``. This reads every metrics file under each folder (``runs/`` at any depth, so a results
-folder with preset subfolders works too), keeps the runs found in both with the same steps and config, and
-prints two Markdown tables:
+own); ``dagsbench`` writes one metrics file per run under ``runs/<preset>/``. This reads every metrics file
+under each folder (``runs/`` at any depth, so a results folder with preset subfolders works too), keeps the
+runs found in both with the same steps and config, and prints two Markdown tables:
 
 - **runs**: per run, Acc cm / C.R. % / PSNR dB (refined, 100 % of the budget) in A and in B, B - A, and
   whether the two were made on one machine (the metrics files' ``machine`` ids; "?" where a file predates
@@ -33,7 +33,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from dynactivegs.errors import DagsError  # noqa: E402
 from dynactivegs.eval.tables import (  # noqa: E402
-    METRIC_BY_KEY, PAIR_METRICS, PRESET_ORDER, _ordered, _wins, short_label,
+    METRIC_BY_KEY, PAIR_METRICS, PRESET_ORDER, _ordered, _wins, machine_id_of, short_label,
 )
 from recorder.bench import config_difference  # noqa: E402
 
@@ -56,10 +56,10 @@ def load_folder(folder: Path) -> dict[Key, dict[str, Any]]:
         try:
             r = json.loads(p.read_text())
             key = (label(r), str(r["scene"]), int(r["seed"]))
-            r["checkpoints"][-1]
-        except (json.JSONDecodeError, KeyError, IndexError, TypeError, ValueError):
+            vals = _values(r)
+        except (json.JSONDecodeError, KeyError, IndexError, TypeError, ValueError, AttributeError):
             raise DagsError(f"{p}: not a dagsbench metrics file (or a truncated one); remove it or re-run it") from None
-        if key in out and _values(out[key]) != _values(r):
+        if key in out and _values(out[key]) != vals:
             raise DagsError(f"{folder}: two metrics files of {key} differ; keep one")
         out[key] = r
     if not out:
@@ -70,10 +70,6 @@ def load_folder(folder: Path) -> dict[Key, dict[str, Any]]:
 def _values(run: dict[str, Any]) -> tuple[float | None, ...]:
     last = run["checkpoints"][-1]
     return tuple(last.get(k) for k in PAIR_METRICS)
-
-
-def _machine(run: dict[str, Any]) -> str | None:
-    return (run.get("machine") or {}).get("id")
 
 
 def common_runs(a: dict[Key, dict[str, Any]], b: dict[Key, dict[str, Any]]
@@ -104,7 +100,7 @@ def runs_table(a: dict[Key, dict[str, Any]], b: dict[Key, dict[str, Any]], keys:
     lines = [f"| preset | scene | seed | A: {head} | B: {head} | B - A | one machine |",
              "|---|---|---|---|---|---|---|"]
     for k in keys:
-        ma, mb = _machine(a[k]), _machine(b[k])
+        ma, mb = machine_id_of(a[k]), machine_id_of(b[k])
         same = "?" if ma is None or mb is None else ("yes" if ma == mb else "no")
         lines.append(f"| {k[0]} | {k[1]} | {k[2]} | {_fmt(_values(a[k]))} | {_fmt(_values(b[k]))} | "
                      f"{_diff(_values(a[k]), _values(b[k]))} | {same} |")

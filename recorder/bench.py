@@ -176,7 +176,9 @@ def check_finished(spec: RunSpec) -> bool:
 def other_machine_line(finished: list[dict[str, Any]], here: str) -> str | None:
     """A warning when some of the ``finished`` runs a sweep resumes were made on another machine than ``here``
     (a machine id); else None."""
-    other = [r for r in finished if (r.get("machine") or {}).get("id") not in (None, here)]
+    from dynactivegs.eval.tables import machine_id_of
+
+    other = [r for r in finished if machine_id_of(r) not in (None, here)]
     if not other:
         return None
     return (f"dagsbench: warning: {len(other)} of the {len(finished)} finished runs in this folder were made on "

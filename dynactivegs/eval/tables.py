@@ -368,11 +368,17 @@ def _losses(per_method: dict[Pair, tuple[list[float | None], list[float | None]]
     return _counts({"": swapped}, specs)[""][1]
 
 
+def machine_id_of(run: dict[str, Any]) -> str | None:
+    """The id of the machine a run was made on (the ``machine`` entry ``dagsbench`` records); None for a run made
+    before the entry existed."""
+    return (run.get("machine") or {}).get("id")
+
+
 def machines(runs: Iterable[dict[str, Any]]) -> dict[str, int]:
-    """Runs per machine id (the ``machine`` entry ``dagsbench`` records; runs without one are left out)."""
+    """Runs per machine id (:func:`machine_id_of`; runs without one are left out)."""
     out: dict[str, int] = {}
     for r in runs:
-        mid = (r.get("machine") or {}).get("id")
+        mid = machine_id_of(r)
         if mid:
             out[mid] = out.get(mid, 0) + 1
     return out
@@ -381,7 +387,7 @@ def machines(runs: Iterable[dict[str, Any]]) -> dict[str, int]:
 def cross_machine_pairs(runs: Sequence[dict[str, Any]], reference: str = "baseline") -> tuple[int, int]:
     """(comparisons of :func:`paired` whose two runs carry different machine ids, all its comparisons)."""
     runs = _dedupe(runs, lambda r: r["preset"])
-    by = {(r["preset"], r["scene"], r["seed"]): (r.get("machine") or {}).get("id") for r in runs}
+    by = {(r["preset"], r["scene"], r["seed"]): machine_id_of(r) for r in runs}
     per = paired(runs, reference, PAIR_METRICS[:1])
     mixed = sum(1 for m, got in per.items() for s, k in got
                 if by[(m, s, k)] and by[(reference, s, k)] and by[(m, s, k)] != by[(reference, s, k)])
