@@ -527,6 +527,69 @@ def test_choice_weights_gives_back_the_logged_choices(finished, capsys):
         mod.main([str(out / "missing.mcap")])
 
 
+def test_people_in_view_splits_the_logged_people_pixels(finished, capsys):
+    """benchmarks/people_in_view.py on the sweep's runs: people px over every logged step, split by blocked steps;
+    R_m ranks of scored choices in [0, 1]; pooled per preset; a missing log is one line."""
+    from replay.source import LogReader
+
+    out, _ = finished
+    mod = _benchmark_module("people_in_view")
+    logs = [out / "runs" / p / "tiny-00-seed0.mcap" for p in ("baseline", "full")]
+    for log in logs:
+        label, preset, rec = mod.people_in_view(log)
+        steps = list(LogReader(log).steps())
+        s = rec.summary()
+        assert label == f"{preset} tiny-00 seed 0" and preset == log.parent.name and s["steps"] == len(steps) == 6
+        assert s["px_pct"] == pytest.approx(100.0 * np.mean([st["/truth"].people_mask.mean() for st in steps]))
+        assert rec.blocked == [bool(st["/planning"].blocked) for st in steps] and s["corridor_pct"] == 0.0
+        assert s["choices"] >= 1 and all(0.0 <= r <= 1.0 for r in rec.rank)
+    assert mod.main([str(log) for log in logs]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[0].startswith("| run | people px % |") and printed[2].startswith("| baseline tiny-00 seed 0 |")
+    assert printed[5].startswith("| preset (runs) |") and printed[7].startswith("| baseline (1) |")
+    with pytest.raises(SystemExit, match="error: .*missing.mcap"):
+        mod.main([str(out / "missing.mcap")])
+
+
+def test_people_in_view_ranks_the_chosen_risk_and_pairs_it_with_the_arrival_frame():
+    """A made-up run: a choice of the riskiest of three views reached with a person in half the frame, then one of
+    the least risky reached with none; the corridor steps by the scene's rooms."""
+    from types import SimpleNamespace as NS
+
+    from dynactivegs.sim.procedural import Room
+
+    mod = _benchmark_module("people_in_view")
+    assert mod.risk_rank(np.array([1.0, 2.0, 3.0]), 2) == 1.0 and mod.risk_rank(np.array([1.0, 2.0, 3.0]), 0) == 0.0
+    assert mod.risk_rank(np.array([2.0, 2.0, 1.0]), 0) == 0.75 and mod.risk_rank(np.array([5.0]), 0) == 0.5
+    rooms = (Room("corridor-0", "corridor", 0.0, 0.0, 4.0, 1.0), Room("living-1", "living", 0.0, 1.0, 4.0, 5.0))
+
+    def truth(x, y, px):
+        mask = np.zeros((2, 4), bool)
+        mask.flat[:px] = True
+        return NS(people_mask=mask, robot=NS(x_m=x, y_m=y))
+
+    def sel(reason, node, yaw=0.0):
+        return NS(target_reason=reason, target_node=node, target_yaw_rad=yaw, cand_node=np.array([0, 1, 2]),
+                  cand_yaw_rad=np.array([0.0, 0.0, 0.0]), cand_score=np.array([1.0, 2.0, 3.0]),
+                  cand_risk=np.array([0.1, 0.5, 0.9]))
+
+    plan = lambda blocked: NS(blocked=blocked)
+    steps = [(truth(1.0, 0.5, 0), plan(False), sel("none", 2)),          # chooses the riskiest view
+             (truth(1.5, 0.5, 8), plan(True), sel("keep", 2)),           # blocked, everything a person
+             (truth(2.0, 3.0, 4), plan(False), sel("reached", 0)),       # there: half a person; then the safest
+             (truth(2.5, 3.0, 2), plan(False), None),                    # selection did not run
+             (truth(3.0, 3.0, 0), plan(False), sel("reached", 1, 1.0)),  # there: nobody; no candidate at yaw 1
+             (truth(3.0, 3.0, 0), plan(False), sel("stuck", 1))]         # given up: not an arrival
+    rec = mod.record_of(steps, rooms)
+    s = rec.summary()
+    assert rec.rank == [1.0, 0.0, 0.5] and rec.arrival == [(1.0, 0.5, 2), (0.0, 0.0, 2)]
+    assert s["choices"] == 3 and s["arrivals"] == 2 and s["arrival_steps"] == 2.0
+    assert s["px_arrival_pct"] == pytest.approx(25.0)
+    assert s["px_blocked_pct"] == 100.0 and s["px_other_pct"] == pytest.approx(100.0 * (0.5 + 0.25) / 5)
+    assert s["corridor_pct"] == pytest.approx(100.0 * 2 / 6) and s["px_corridor_pct"] == pytest.approx(50.0)
+    assert np.isnan(s["rho"]) and np.isnan(s["rho_p"])                     # two arrivals: no correlation
+
+
 def test_machine_id_follows_the_cpu_and_the_libraries():
     info = {"cpu": "AMD EPYC", "isa": "AVX512", "llvm_cpu": "znver4", "cores": "2"}
     versions = {"python": "3.12.1", "torch": "2.13.0", "numpy": "2.4.6"}
