@@ -18,8 +18,10 @@ From each run log (its frames, the simulator's truth and the selection's logged 
 - **rho**: the rank correlation (Spearman) of the chosen views' R_m rank with people px at arrival, over the
   run's arrivals, and its p-value.
 
-A last block pools each preset's runs: the same means over all their steps and choices, and rho over all their
-arrivals (the rank is within each step's candidates, so it pools across runs). A positive rho says the views that
+A second block pools each preset's runs: the same means over all their steps and choices, and rho over all their
+arrivals (the rank is within each step's candidates, so it pools across runs); a third splits each preset's
+arrivals at their median steps from the choice into the sooner and the later half (how fast what R_m knows goes
+stale). A positive rho says the views that
 eq. (9) rated risky did show more people when the robot got there; near 0, R_m (where people were seen before)
 says little about where they are by the time the robot arrives, which can take tens of steps.
 """
@@ -61,17 +63,35 @@ class PeopleInView:
         px, blocked, corridor = np.asarray(self.px), np.asarray(self.blocked, bool), np.asarray(self.corridor, bool)
         pct = (lambda m: 100.0 * float(px[m].mean()) if m.any() else float("nan"))
         arrived = np.asarray(self.arrival, float).reshape(-1, 3)
-        rho = rho_p = float("nan")
-        if len(arrived) >= 3 and np.ptp(arrived[:, 0]) > 0 and np.ptp(arrived[:, 1]) > 0:
-            from scipy.stats import spearmanr
-
-            rho, rho_p = (float(v) for v in spearmanr(arrived[:, 0], arrived[:, 1]))
+        rho, rho_p = _rho(arrived[:, 0], arrived[:, 1])
         return {"steps": len(px), "px_pct": pct(np.ones(len(px), bool)), "px_blocked_pct": pct(blocked),
                 "px_other_pct": pct(~blocked), "corridor_pct": 100.0 * float(corridor.mean()) if len(px) else 0.0,
                 "px_corridor_pct": pct(corridor), "px_elsewhere_pct": pct(~corridor), "choices": len(self.rank),
                 "rank": float(np.mean(self.rank)) if self.rank else float("nan"), "arrivals": len(arrived),
                 "arrival_steps": float(arrived[:, 2].mean()) if len(arrived) else float("nan"),
                 "px_arrival_pct": 100.0 * float(arrived[:, 1].mean()) if len(arrived) else float("nan"), "rho": rho, "rho_p": rho_p}
+
+
+def _rho(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Spearman (rho, p) of ``x`` and ``y``; nan for fewer than 3 pairs or a constant side."""
+    if len(x) < 3 or np.ptp(x) == 0 or np.ptp(y) == 0:
+        return float("nan"), float("nan")
+    from scipy.stats import spearmanr
+
+    return tuple(float(v) for v in spearmanr(x, y))
+
+
+def by_delay(arrival: list[tuple[float, float, int]]) -> tuple[float, list[dict[str, float]]]:
+    """The median steps from choice to arrival, and for the arrivals at most that many steps after their choice and
+    for the later ones: n, mean people px % at arrival, rho and its p (R_m rank against people px)."""
+    a = np.asarray(arrival, float).reshape(-1, 3)
+    median = float(np.median(a[:, 2])) if len(a) else float("nan")
+    halves = []
+    for part in (a[a[:, 2] <= median], a[a[:, 2] > median]):
+        rho, p = _rho(part[:, 0], part[:, 1])
+        halves.append({"n": len(part), "px_pct": 100.0 * float(part[:, 1].mean()) if len(part) else float("nan"),
+                       "rho": rho, "rho_p": p})
+    return median, halves
 
 
 def risk_rank(risk: np.ndarray, chosen: int) -> float:
@@ -156,6 +176,12 @@ def main(argv: list[str] | None = None) -> int:
     print("\n" + header.replace("| run |", "| preset (runs) |"))
     for preset, rec in pooled.items():
         print(row(f"{preset} ({counts[preset]})", rec.summary()))
+    print("\n| preset (runs) | median steps to arrival | sooner: arrivals, px %, rho (p) | later: arrivals, px %, "
+          "rho (p) |\n|---|---|---|---|")
+    for preset, rec in pooled.items():
+        median, halves = by_delay(rec.arrival)
+        cells = " | ".join(f"{h['n']}, {h['px_pct']:.1f}, {h['rho']:+.2f} (p {h['rho_p']:.2g})" for h in halves)
+        print(f"| {preset} ({counts[preset]}) | {median:.0f} | {cells} |")
     return 0
 
 

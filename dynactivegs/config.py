@@ -24,7 +24,7 @@ from dynactivegs.sim.config import CameraConfig, CrowdConfig, RobotConfig, SimCo
 
 __all__ = ["CameraConfig", "CrowdConfig", "DagsConfig", "FeatureConfig", "FieldsConfig", "MappingConfig",
            "PerceptionConfig", "PlanningConfig", "PRESETS", "RobotConfig", "SelectionConfig", "SimConfig",
-           "UncertaintyConfig", "preset", "to_json", "with_overrides"]
+           "UncertaintyConfig", "check_consistent", "preset", "to_json", "with_overrides"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,6 +67,47 @@ PRESETS: dict[str, DagsConfig] = {
 }
 
 
+ROBOT_KEYS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
+    # (what the simulator's robot has, how the stages' copies must relate to it, the copies)
+    ("sim.robot.forward_step_m", "==", ("planning.actions.forward_step_m", "selection.forward_step_m")),
+    ("sim.robot.turn_step_deg", "==", ("planning.actions.turn_step_deg",)),
+    ("sim.robot.radius_m", ">=", ("planning.actions.radius_m", "selection.voronoi.robot_radius_m")),
+    ("sim.robot.body_height_m", ">=", ("planning.actions.band_hi_m", "selection.occupancy.band_hi_m")),
+    ("sim.camera.height_m", "==", ("selection.visibility.camera_height_m",)),
+    ("selection.reach_tol_m", "<=", ("planning.actions.target_tol_m",)),
+    ("selection.stuck_steps", "==", ("planning.actions.stuck_steps",)),
+    ("selection.stuck_move_tol_m", "==", ("planning.actions.stuck_move_tol_m",)),
+)
+"""Settings the stages copy from the robot (or from each other), since a stage reads only its own config. ``==``:
+the copy must equal the original (the planner's model of one action is the robot's action); ``>=``: the copy may
+be more cautious (a planning radius above the body's keeps a margin, one below plans through gaps the body does not
+pass); ``<=``: the planner's target tolerance may not exceed the selection's, or the robot stops short of where the
+selection counts a target reached and waits there until it gives the target up as stuck."""
+
+
+def _value(cfg: DagsConfig, key: str) -> object:
+    for name in key.split("."):
+        cfg = getattr(cfg, name)
+    return cfg
+
+
+def check_consistent(cfg: DagsConfig) -> DagsConfig:
+    """``cfg`` when every copy of ROBOT_KEYS relates to its original as it must, else a one-line
+    :class:`ConfigError` naming both keys and the values to set (a ``--set`` of one of them alone)."""
+    ok = {"==": lambda copy, orig: copy == orig, ">=": lambda copy, orig: copy >= orig,
+          "<=": lambda copy, orig: copy <= orig}
+    for original, rel, copies in ROBOT_KEYS:
+        want = _value(cfg, original)
+        for key in copies:
+            have = _value(cfg, key)
+            if not ok[rel](have, want):
+                fix = " ".join(f"{k}={want}" for k in copies)
+                raise ConfigError(f"bad config value {key}={have!r}: must be {rel} {original} ({want}); the stages "
+                                  f"keep their own copy of it, so set them together, e.g. --set {original}={want} "
+                                  f"{fix}")
+    return cfg
+
+
 def preset(name: str) -> DagsConfig:
     """The named preset; a one-line error lists the names for an unknown one."""
     if name not in PRESETS:
@@ -94,13 +135,14 @@ def _parse(value: str, current: object, key: str) -> object:
 
 
 def with_overrides(cfg, overrides: list[str] | tuple[str, ...]):
-    """A copy of ``cfg`` with ``section.sub.field=value`` strings applied (values parsed by the field's type)."""
+    """A copy of ``cfg`` with ``section.sub.field=value`` strings applied (values parsed by the field's type); a
+    :class:`DagsConfig` is checked for settings copied between stages (:func:`check_consistent`) once all are."""
     for item in overrides:
         if "=" not in item:
             raise ConfigError(f"bad override {item!r}: write key=value, e.g. mapping.weighted=false")
         key, value = item.split("=", 1)
         cfg = _set(cfg, key.strip().split("."), value.strip(), key.strip())
-    return cfg
+    return check_consistent(cfg) if isinstance(cfg, DagsConfig) else cfg
 
 
 def _set(obj, path: list[str], value: str, key: str):

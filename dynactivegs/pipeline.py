@@ -20,7 +20,7 @@ from typing import Callable, Protocol
 
 import numpy as np
 
-from dynactivegs.config import DagsConfig
+from dynactivegs.config import DagsConfig, check_consistent
 from dynactivegs.errors import DagsError
 from dynactivegs.fields import stage as fields_stage
 from dynactivegs.mapping import stage as mapping_stage
@@ -58,7 +58,9 @@ def stage_index(name: str) -> int:
 
 
 def init_states(cfg: DagsConfig) -> list[object]:
-    """Step 0's state of every stage, built from the config alone."""
+    """Step 0's state of every stage, built from the config alone (a one-line error for settings the stages copy
+    from the robot that disagree with it: :func:`~dynactivegs.config.check_consistent`)."""
+    check_consistent(cfg)
     return [s.init_state(cfg) for s in STAGES]
 
 

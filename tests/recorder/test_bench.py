@@ -547,6 +547,7 @@ def test_people_in_view_splits_the_logged_people_pixels(finished, capsys):
     printed = capsys.readouterr().out.splitlines()
     assert printed[0].startswith("| run | people px % |") and printed[2].startswith("| baseline tiny-00 seed 0 |")
     assert printed[5].startswith("| preset (runs) |") and printed[7].startswith("| baseline (1) |")
+    assert printed[10].startswith("| preset (runs) | median steps to arrival |") and printed[12].startswith("| baseline")
     with pytest.raises(SystemExit, match="error: .*missing.mcap"):
         mod.main([str(out / "missing.mcap")])
 
@@ -588,6 +589,10 @@ def test_people_in_view_ranks_the_chosen_risk_and_pairs_it_with_the_arrival_fram
     assert s["px_blocked_pct"] == 100.0 and s["px_other_pct"] == pytest.approx(100.0 * (0.5 + 0.25) / 5)
     assert s["corridor_pct"] == pytest.approx(100.0 * 2 / 6) and s["px_corridor_pct"] == pytest.approx(50.0)
     assert np.isnan(s["rho"]) and np.isnan(s["rho_p"])                     # two arrivals: no correlation
+    median, (sooner, later) = mod.by_delay([(0.0, 0.0, 5), (0.5, 0.1, 10), (1.0, 0.2, 15), (0.2, 0.3, 30),
+                                            (0.4, 0.2, 40), (0.9, 0.1, 50)])
+    assert median == 22.5 and sooner["n"] == later["n"] == 3 and sooner["rho"] == pytest.approx(1.0)
+    assert later["rho"] == pytest.approx(-1.0) and sooner["px_pct"] == pytest.approx(10.0)
 
 
 def test_machine_id_follows_the_cpu_and_the_libraries():

@@ -49,6 +49,7 @@ def test_dagsrun_bad_input_is_one_line_exit_2(tmp_path, capsys):
              (["--set", "mapping.bogus=1"], "unknown config key 'mapping.bogus'"),
              (["--set", "mapping.weighted=maybe"], "bad value for mapping.weighted"),
              (["--set", "sim.camera.width_px=2"], "camera.width_px"),
+             (["--set", "sim.robot.turn_step_deg=15"], "planning.actions.turn_step_deg=10.0: must be =="),
              (["--steps", "0"], "--steps")]
     if not torch.cuda.is_available():
         cases.append((["--device", "cuda"], "--device cuda: no CUDA device"))
@@ -58,6 +59,37 @@ def test_dagsrun_bad_input_is_one_line_exit_2(tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert rc == 2, argv
         assert len(err.splitlines()) == 1 and phrase in err and err.startswith("dagsrun: error:"), err
+
+
+def test_settings_the_stages_copy_from_the_robot_must_agree_with_it():
+    """A copy equal where it must be, a more cautious one allowed, a changed original alone refused naming both keys
+    and the values to set; set together they pass, and the pipeline refuses a config built around the check."""
+    import dataclasses
+
+    import pytest
+
+    from dynactivegs.config import PRESETS, check_consistent, preset, with_overrides
+    from dynactivegs.errors import ConfigError
+    from dynactivegs.pipeline import init_states
+
+    for name in PRESETS:
+        assert check_consistent(preset(name)) is preset(name)
+    cfg = preset("full")
+    moved = with_overrides(cfg, ["sim.robot.turn_step_deg=15", "planning.actions.turn_step_deg=15"])
+    assert moved.planning.actions.turn_step_deg == 15.0
+    assert with_overrides(cfg, ["planning.actions.radius_m=0.25"]).planning.actions.radius_m == 0.25   # a margin
+    with pytest.raises(ConfigError, match=r"selection.voronoi.robot_radius_m=0.1: must be >= sim.robot.radius_m "
+                                          r"\(0.18\).* --set sim.robot.radius_m=0.18 planning.actions.radius_m=0.18 "
+                                          r"selection.voronoi.robot_radius_m=0.18$"):
+        with_overrides(cfg, ["selection.voronoi.robot_radius_m=0.1"])
+    with pytest.raises(ConfigError, match=r"planning.actions.target_tol_m=0.4: must be <= selection.reach_tol_m"):
+        with_overrides(cfg, ["planning.actions.target_tol_m=0.4"])
+    with pytest.raises(ConfigError, match=r"planning.actions.stuck_steps=40: must be == selection.stuck_steps \(60\)"):
+        with_overrides(cfg, ["selection.stuck_steps=60"])
+    built = dataclasses.replace(cfg, sim=dataclasses.replace(cfg.sim, camera=dataclasses.replace(cfg.sim.camera,
+                                                                                                height_m=1.0)))
+    with pytest.raises(ConfigError, match="selection.visibility.camera_height_m"):
+        init_states(built)
 
 
 def test_ctrl_c_stops_after_a_whole_step_and_the_log_replays(tmp_path):
