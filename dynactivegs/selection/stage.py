@@ -29,10 +29,11 @@ Stuck detection. Selection runs before planning in a step and reads nothing of p
 so it detects the lack of progress itself: the robot has not left a disc of
 ``stuck_move_tol_m`` for ``stuck_steps`` steps while it had an unreached target (e.g. a
 person stands in a doorway), or it bumped ``bump_give_up`` times on the way to it. The
-planner's ``PlanningOut.stuck`` applies the first rule to report it; with equal parameters the
-two agree on it. A target given up as stuck or timed out (and,
-for ``frontier`` and ``random``, one reached) is banned for ``ban_steps``; for the scored
-variants a reached view bans the views overlapping it (``reached_ban_deg``). One given up as
+planner's ``PlanningOut.stuck`` applies the first rule to report it; the parameters are equal
+(:func:`dynactivegs.config.check_consistent`), so the two agree on it. A target given up as
+stuck or timed out (and, for ``frontier`` and ``random``, one reached) is banned for
+``ban_steps``; for the scored variants a reached view bans the views overlapping it
+(``reached_ban_deg``). One given up as
 unreachable is not banned: it cannot be chosen while it stays unreachable, and a door that
 closes in one graph build (a person in it) often opens in the next. A target given up as stuck
 in front of something the camera sees also leaves a disc there, like a bump disc, for the next
