@@ -7,7 +7,8 @@ From each run log (its frames, the simulator's truth and the selection's logged 
 - **people px %**: the share of the camera's pixels on a person, over all steps; split into the steps the local
   collision check **blocked** a forward move and the others, and by where the robot stood: in a **corridor** room
   or elsewhere (procedural scenes; rooms of other kinds, and the doorways between rooms, count as elsewhere);
-- **corridor %**: the share of steps the robot stood in a corridor;
+- **corridor %**: the share of steps the robot stood in a corridor, and of the new targets (every variant's, scored
+  or not) that lay in one;
 - **choices**: new targets with a scored candidate view (``random`` and ``frontier`` choices are not scored);
   **R_m rank**: the chosen view's eq. (9) risk among that step's candidates (0 = the least risky candidate,
   1 = the most, ties halved), mean over the choices: how far the selection steered away from where people were
@@ -41,7 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from psnr_breakdown import logged_config  # noqa: E402  (the same reading of a run log)
 
-COLUMNS = ("run", "people px %", "px blocked / other %", "corridor %", "px corridor / elsewhere %", "choices",
+COLUMNS = ("run", "people px %", "px blocked / other %", "corridor % steps / targets", "px corridor / elsewhere %", "choices",
            "R_m rank", "arrivals (steps)", "px at arrival %", "rho (p)")
 
 
@@ -52,11 +53,12 @@ class PeopleInView:
     px: list[float] = field(default_factory=list)           # per step: the share of pixels on a person
     blocked: list[bool] = field(default_factory=list)       # per step: the collision check stopped a forward move
     corridor: list[bool] = field(default_factory=list)      # per step: the robot stood in a corridor
+    target_corridor: list[bool] = field(default_factory=list)   # per new target: it lay in a corridor
     rank: list[float] = field(default_factory=list)         # per scored choice: the chosen view's R_m rank
     arrival: list[tuple[float, float, int]] = field(default_factory=list)   # per reached choice: (rank, px, steps)
 
     def extend(self, other: "PeopleInView") -> None:
-        for name in ("px", "blocked", "corridor", "rank", "arrival"):
+        for name in ("px", "blocked", "corridor", "target_corridor", "rank", "arrival"):
             getattr(self, name).extend(getattr(other, name))
 
     def summary(self) -> dict[str, float]:
@@ -66,6 +68,7 @@ class PeopleInView:
         rho, rho_p = _rho(arrived[:, 0], arrived[:, 1])
         return {"steps": len(px), "px_pct": pct(np.ones(len(px), bool)), "px_blocked_pct": pct(blocked),
                 "px_other_pct": pct(~blocked), "corridor_pct": 100.0 * float(corridor.mean()) if len(px) else 0.0,
+                "target_corridor_pct": 100.0 * float(np.mean(self.target_corridor)) if self.target_corridor else 0.0,
                 "px_corridor_pct": pct(corridor), "px_elsewhere_pct": pct(~corridor), "choices": len(self.rank),
                 "rank": float(np.mean(self.rank)) if self.rank else float("nan"), "arrivals": len(arrived),
                 "arrival_steps": float(arrived[:, 2].mean()) if len(arrived) else float("nan"),
@@ -127,6 +130,8 @@ def record_of(steps, rooms) -> PeopleInView:
         if pending is not None and sel.target_reason == "reached":
             rec.arrival.append((pending[0], px, step - pending[1]))   # this step's frame: the view it was for
         pending = None
+        if sel.target_node >= 0:
+            rec.target_corridor.append(in_corridor(rooms, *sel.target_xy_m))
         chosen = chosen_candidate(sel) if sel.target_node >= 0 and len(sel.cand_node) else None
         if chosen is not None:
             pending = (risk_rank(sel.cand_risk, chosen), step)
@@ -151,7 +156,7 @@ def people_in_view(mcap: Path) -> tuple[str, str, PeopleInView]:
 
 def row(label: str, s: dict[str, float]) -> str:
     return (f"| {label} | {s['px_pct']:.1f} | {s['px_blocked_pct']:.1f} / {s['px_other_pct']:.1f} | "
-            f"{s['corridor_pct']:.0f} | {s['px_corridor_pct']:.1f} / {s['px_elsewhere_pct']:.1f} | {s['choices']} | "
+            f"{s['corridor_pct']:.0f} / {s['target_corridor_pct']:.0f} | {s['px_corridor_pct']:.1f} / {s['px_elsewhere_pct']:.1f} | {s['choices']} | "
             f"{s['rank']:.2f} | {s['arrivals']} ({s['arrival_steps']:.0f}) | {s['px_arrival_pct']:.1f} | {s['rho']:+.2f} (p {s['rho_p']:.2g}) |")
 
 

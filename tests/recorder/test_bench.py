@@ -554,7 +554,7 @@ def test_people_in_view_splits_the_logged_people_pixels(finished, capsys):
 
 def test_people_in_view_ranks_the_chosen_risk_and_pairs_it_with_the_arrival_frame():
     """A made-up run: a choice of the riskiest of three views reached with a person in half the frame, then one of
-    the least risky reached with none; the corridor steps by the scene's rooms."""
+    the least risky reached with none; the corridor steps and targets by the scene's rooms."""
     from types import SimpleNamespace as NS
 
     from dynactivegs.sim.procedural import Room
@@ -570,7 +570,8 @@ def test_people_in_view_ranks_the_chosen_risk_and_pairs_it_with_the_arrival_fram
         return NS(people_mask=mask, robot=NS(x_m=x, y_m=y))
 
     def sel(reason, node, yaw=0.0):
-        return NS(target_reason=reason, target_node=node, target_yaw_rad=yaw, cand_node=np.array([0, 1, 2]),
+        return NS(target_reason=reason, target_node=node, target_yaw_rad=yaw,
+                  target_xy_m=np.array([1.0, 3.0 - 2 * node]), cand_node=np.array([0, 1, 2]),
                   cand_yaw_rad=np.array([0.0, 0.0, 0.0]), cand_score=np.array([1.0, 2.0, 3.0]),
                   cand_risk=np.array([0.1, 0.5, 0.9]))
 
@@ -588,6 +589,7 @@ def test_people_in_view_ranks_the_chosen_risk_and_pairs_it_with_the_arrival_fram
     assert s["px_arrival_pct"] == pytest.approx(25.0)
     assert s["px_blocked_pct"] == 100.0 and s["px_other_pct"] == pytest.approx(100.0 * (0.5 + 0.25) / 5)
     assert s["corridor_pct"] == pytest.approx(100.0 * 2 / 6) and s["px_corridor_pct"] == pytest.approx(50.0)
+    assert rec.target_corridor == [False, False, True, True] and s["target_corridor_pct"] == 50.0
     assert np.isnan(s["rho"]) and np.isnan(s["rho_p"])                     # two arrivals: no correlation
     median, (sooner, later) = mod.by_delay([(0.0, 0.0, 5), (0.5, 0.1, 10), (1.0, 0.2, 15), (0.2, 0.3, 30),
                                             (0.4, 0.2, 40), (0.9, 0.1, 50)])
