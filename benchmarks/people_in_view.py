@@ -42,7 +42,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from psnr_breakdown import logged_config  # noqa: E402  (the same reading of a run log)
 
-COLUMNS = ("run", "people px %", "px blocked / other %", "corridor % steps / targets", "px corridor / elsewhere %", "choices",
+COLUMNS = ("run", "people px %", "px blocked / other %", "corridor % steps / targets", "px corridor / elsewhere %",
+           "choices",
            "R_m rank", "arrivals (steps)", "px at arrival %", "rho (p)")
 
 
@@ -72,7 +73,8 @@ class PeopleInView:
                 "px_corridor_pct": pct(corridor), "px_elsewhere_pct": pct(~corridor), "choices": len(self.rank),
                 "rank": float(np.mean(self.rank)) if self.rank else float("nan"), "arrivals": len(arrived),
                 "arrival_steps": float(arrived[:, 2].mean()) if len(arrived) else float("nan"),
-                "px_arrival_pct": 100.0 * float(arrived[:, 1].mean()) if len(arrived) else float("nan"), "rho": rho, "rho_p": rho_p}
+                "px_arrival_pct": 100.0 * float(arrived[:, 1].mean()) if len(arrived) else float("nan"),
+                "rho": rho, "rho_p": rho_p}
 
 
 def _rho(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
@@ -154,10 +156,17 @@ def people_in_view(mcap: Path) -> tuple[str, str, PeopleInView]:
     return f"{preset} {cfg.sim.scene} seed {cfg.seed}", preset, rec
 
 
+def _f(value: float, spec: str) -> str:
+    """``value`` formatted by ``spec``, or "-" where it is undefined (nan: no corridor, no arrival, too few)."""
+    return "-" if value != value else format(value, spec)
+
+
 def row(label: str, s: dict[str, float]) -> str:
-    return (f"| {label} | {s['px_pct']:.1f} | {s['px_blocked_pct']:.1f} / {s['px_other_pct']:.1f} | "
-            f"{s['corridor_pct']:.0f} / {s['target_corridor_pct']:.0f} | {s['px_corridor_pct']:.1f} / {s['px_elsewhere_pct']:.1f} | {s['choices']} | "
-            f"{s['rank']:.2f} | {s['arrivals']} ({s['arrival_steps']:.0f}) | {s['px_arrival_pct']:.1f} | {s['rho']:+.2f} (p {s['rho_p']:.2g}) |")
+    return (f"| {label} | {s['px_pct']:.1f} | {_f(s['px_blocked_pct'], '.1f')} / {_f(s['px_other_pct'], '.1f')} | "
+            f"{s['corridor_pct']:.0f} / {s['target_corridor_pct']:.0f} | {_f(s['px_corridor_pct'], '.1f')} / "
+            f"{_f(s['px_elsewhere_pct'], '.1f')} | {s['choices']} | {_f(s['rank'], '.2f')} | {s['arrivals']} "
+            f"({_f(s['arrival_steps'], '.0f')}) | {_f(s['px_arrival_pct'], '.1f')} | {_f(s['rho'], '+.2f')} "
+            f"(p {_f(s['rho_p'], '.2g')}) |")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -185,8 +194,9 @@ def main(argv: list[str] | None = None) -> int:
           "rho (p) |\n|---|---|---|---|")
     for preset, rec in pooled.items():
         median, halves = by_delay(rec.arrival)
-        cells = " | ".join(f"{h['n']}, {h['px_pct']:.1f}, {h['rho']:+.2f} (p {h['rho_p']:.2g})" for h in halves)
-        print(f"| {preset} ({counts[preset]}) | {median:.0f} | {cells} |")
+        cells = " | ".join(f"{h['n']}, {_f(h['px_pct'], '.1f')}, {_f(h['rho'], '+.2f')} (p {_f(h['rho_p'], '.2g')})"
+                           for h in halves)
+        print(f"| {preset} ({counts[preset]}) | {_f(median, '.0f')} | {cells} |")
     return 0
 
 
