@@ -47,6 +47,14 @@ class Choice:
     dist_m: np.ndarray        # (C,) graph distance from the robot's start node
 
 
+def logged_choice(sel, pool: np.ndarray) -> int | None:
+    """The index of the logged target view (node and yaw) among ``sel``'s candidates in ``pool`` (bool (C,)), or
+    None when it is none of them (not a scored choice)."""
+    yaw_off = np.abs(np.angle(np.exp(1j * (sel.cand_yaw_rad - sel.target_yaw_rad))))
+    hit = np.nonzero(pool & (sel.cand_node == sel.target_node) & (yaw_off < 1e-6))[0]
+    return int(hit[0]) if len(hit) else None
+
+
 def read_choices(mcap: Path) -> tuple[str, object, list[Choice]]:
     """The run's label, its config and every new-target choice with logged candidates."""
     from dynactivegs.records import robot_pose_of
@@ -65,9 +73,8 @@ def read_choices(mcap: Path) -> tuple[str, object, list[Choice]]:
             continue
         finite = np.isfinite(s.cand_score)
         pool = finite & (s.node_region[s.cand_node] == s.node_region[s.target_node]) if by_region else finite
-        hit = np.nonzero(pool & (s.cand_node == s.target_node)
-                         & (np.abs(np.angle(np.exp(1j * (s.cand_yaw_rad - s.target_yaw_rad)))) < 1e-6))[0]
-        if len(hit) == 0:
+        chosen = logged_choice(s, pool)
+        if chosen is None:
             continue                                  # not a scored choice (e.g. random, frontier)
         pose = robot_pose_of(st["/frame"])
         robot_xy = np.array([pose.x_m, pose.y_m])
@@ -76,7 +83,7 @@ def read_choices(mcap: Path) -> tuple[str, object, list[Choice]]:
         ny = sel_cfg.visibility.n_yaws            # the candidates are every scored node x every yaw, node-major
         turn = _turning_rad(s.node_xy_m[s.cand_node[::ny]], s.cand_yaw_rad[:ny], robot_xy, pose.yaw_rad,
                             sel_cfg.reach_tol_m).ravel()
-        out.append(Choice(st.step, pool, int(hit[0]), s.cand_gain, s.cand_risk, s.cand_cost,
+        out.append(Choice(st.step, pool, chosen, s.cand_gain, s.cand_risk, s.cand_cost,
                           dist[s.cand_node] + sel_cfg.turn_cost_m * turn, dist[s.cand_node]))
     label = f"{reader.metadata.get('preset', '?')} {cfg.sim.scene} seed {cfg.seed}"
     metrics = Path(mcap).with_suffix(".json")              # dagsbench's metrics file: the run's --set overrides

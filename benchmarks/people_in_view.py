@@ -40,11 +40,11 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from choice_weights import logged_choice  # noqa: E402  (the same matching of the target to its candidate)
 from psnr_breakdown import logged_config  # noqa: E402  (the same reading of a run log)
 
 COLUMNS = ("run", "people px %", "px blocked / other %", "corridor % steps / targets", "px corridor / elsewhere %",
-           "choices",
-           "R_m rank", "arrivals (steps)", "px at arrival %", "rho (p)")
+           "choices", "R_m rank", "arrivals (steps)", "px at arrival %", "rho (p)")
 
 
 @dataclass
@@ -107,13 +107,6 @@ def risk_rank(risk: np.ndarray, chosen: int) -> float:
     return float(((others < risk[chosen]).sum() + 0.5 * (others == risk[chosen]).sum()) / len(others))
 
 
-def chosen_candidate(sel) -> int | None:
-    """The index of the logged target view among ``sel``'s scored candidates, or None (not a scored choice)."""
-    yaw_off = np.abs(np.angle(np.exp(1j * (sel.cand_yaw_rad - sel.target_yaw_rad))))
-    hit = np.nonzero(np.isfinite(sel.cand_score) & (sel.cand_node == sel.target_node) & (yaw_off < 1e-6))[0]
-    return int(hit[0]) if len(hit) else None
-
-
 def in_corridor(rooms, x: float, y: float) -> bool:
     return any(r.kind == "corridor" and r.x0 <= x <= r.x1 and r.y0 <= y <= r.y1 for r in rooms)
 
@@ -134,7 +127,8 @@ def record_of(steps, rooms) -> PeopleInView:
         pending = None
         if sel.target_node >= 0:
             rec.target_corridor.append(in_corridor(rooms, *sel.target_xy_m))
-        chosen = chosen_candidate(sel) if sel.target_node >= 0 and len(sel.cand_node) else None
+        scored = np.isfinite(sel.cand_score)                # the candidates eq. (7) (or its variant) scored
+        chosen = logged_choice(sel, scored) if sel.target_node >= 0 and len(sel.cand_node) else None
         if chosen is not None:
             pending = (risk_rank(sel.cand_risk, chosen), step)
             rec.rank.append(pending[0])

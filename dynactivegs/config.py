@@ -24,7 +24,7 @@ from dynactivegs.sim.config import CameraConfig, CrowdConfig, RobotConfig, SimCo
 
 __all__ = ["CameraConfig", "CrowdConfig", "DagsConfig", "FeatureConfig", "FieldsConfig", "MappingConfig",
            "PerceptionConfig", "PlanningConfig", "PRESETS", "RobotConfig", "SelectionConfig", "SimConfig",
-           "UncertaintyConfig", "check_consistent", "preset", "to_json", "with_overrides"]
+           "UncertaintyConfig", "check_consistent", "config_value", "preset", "to_json", "with_overrides"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -85,7 +85,8 @@ pass); ``<=``: the planner's target tolerance may not exceed the selection's, or
 selection counts a target reached and waits there until it gives the target up as stuck."""
 
 
-def _value(cfg: DagsConfig, key: str) -> object:
+def config_value(cfg, key: str) -> object:
+    """The value of the dotted ``key`` (``planning.actions.radius_m``) in ``cfg``."""
     for name in key.split("."):
         cfg = getattr(cfg, name)
     return cfg
@@ -97,9 +98,9 @@ def check_consistent(cfg: DagsConfig) -> DagsConfig:
     ok = {"==": lambda copy, orig: copy == orig, ">=": lambda copy, orig: copy >= orig,
           "<=": lambda copy, orig: copy <= orig}
     for original, rel, copies in ROBOT_KEYS:
-        want = _value(cfg, original)
+        want = config_value(cfg, original)
         for key in copies:
-            have = _value(cfg, key)
+            have = config_value(cfg, key)
             if not ok[rel](have, want):
                 fix = " ".join(f"{k}={want}" for k in copies)
                 raise ConfigError(f"bad config value {key}={have!r}: must be {rel} {original} ({want}); the stages "

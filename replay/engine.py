@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from dynactivegs import pipeline
-from dynactivegs.config import DagsConfig, config_from_json, with_overrides
+from dynactivegs.config import DagsConfig, config_from_json, config_value, with_overrides
 from dynactivegs.errors import DagsError
 from dynactivegs.records import MappingOut, StepRecord
 from recorder.live import DEFAULT_MAP_EVERY, known_area_m2, occupancy_of, refine_with_bar, wants_map
@@ -190,14 +190,10 @@ class ReplayResult:
 
 
 def _override_changes(cfg: DagsConfig, overrides: list[str]) -> list[str]:
-    """``key=new (was old)`` for each override."""
+    """``key=new (was old)`` for each override (keys already checked by ``with_overrides``)."""
     out = []
     for kv in overrides:
-        key = kv.split("=", 1)[0].strip()
-        obj: Any = cfg
-        for part in key.split("."):
-            obj = getattr(obj, part, None)
-        out.append(f"{kv} (was {obj})")
+        out.append(f"{kv} (was {config_value(cfg, kv.split('=', 1)[0].strip())})")
     return out
 
 
