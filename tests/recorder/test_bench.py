@@ -252,6 +252,57 @@ def test_a_pool_worker_whose_parent_died_while_it_started_exits():
     assert child.returncode == 0 and "alive" in child.stdout
 
 
+
+def test_ghost_occluders_finds_surface_over_the_free_floor():
+    """A made-up truth map: 2 x 3 m of floor at 0.1 m cells with a wall along x = 0; surface voxels in the open at a
+    person's height are ghosts, the floor's, those by the wall, above 2.1 m or off the map are not."""
+    from types import SimpleNamespace as NS
+
+    from scipy.ndimage import distance_transform_edt
+
+    mod = _benchmark_module("ghost_occluders")
+    free = np.ones((20, 30), bool)                                  # rows along y, columns along x
+    free[:, 0] = False                                              # the wall: x in [0, 0.1)
+    fs = NS(origin_xy_m=np.array([0.0, 0.0]), res_m=0.1, shape=free.shape)
+    clear_m = distance_transform_edt(free) * 0.1
+    ijk = np.array([[20, 10, 20],      # x 1.025, y 0.525, z 1.025: in the open, a person's height -> ghost
+                    [20, 10, 1],       # z 0.075: the floor's own voxel
+                    [3, 10, 20],       # x 0.175: within 0.15 m of the wall
+                    [20, 10, 60],      # z 3.025: above a person
+                    [200, 10, 20],     # x 10.025: off the map
+                    [-3, 10, 20]], np.int32)
+    assert mod.ghost_voxels(ijk, 0.05, fs, clear_m, 0.15).tolist() == [True, False, False, False, False, False]
+    assert mod.ghost_voxels(ijk, 0.05, fs, clear_m, 0.0)[2]         # no margin: by the wall counts too
+
+
+def test_ghost_occluders_re_runs_each_choice_without_the_ghosts(finished, capsys, monkeypatch):
+    """benchmarks/ghost_occluders.py on the sweep's runs: the re-run selection gives back every logged target; with
+    every surface voxel taken for a ghost, each logged new target is chosen again without the map's occluders."""
+    from replay.source import LogReader
+
+    out, _ = finished
+    mod = _benchmark_module("ghost_occluders")
+    log = out / "runs" / "baseline" / "tiny-00-seed0.mcap"
+    steps = list(LogReader(log).steps())
+    label, preset, rec = mod.ghost_record(log, 0.15)
+    assert label == "baseline tiny-00 seed 0" and preset == "baseline" and len(rec.ghosts) == len(steps) == 6
+    assert rec.replayed == 6 and rec.choices <= sum(mod._new_target(st["/selection"]) for st in steps)
+    monkeypatch.setattr(mod, "ghost_voxels", lambda ijk, *a: np.ones(len(ijk), bool))
+    _, _, every = mod.ghost_record(log, 0.15)
+    new_targets = sum(mod._new_target(st["/selection"]) for st in steps)
+    assert every.ghosts == [len(st["/mapping"].surface_ijk) for st in steps] and every.replayed == 6
+    assert every.choices == new_targets >= 1 and 0 <= every.changed <= every.choices
+    assert every.gain_free > 0 and every.corridor_logged == every.corridor_free == 0     # tiny-00: no corridor
+    assert mod.main([str(log)]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[0].startswith("| run | steps | ghost voxels")
+    assert printed[2].startswith("| baseline tiny-00 seed 0 | 6 |")
+    assert printed[2] == mod.row(label, every)          # main takes the record ghost_record makes
+    assert printed[4].startswith("| preset (runs) |") and printed[6].startswith("| baseline (1) | 6 |")
+    for argv, words in (([str(out / "missing.mcap")], "missing.mcap"), ([str(log), "--margin", "-1"], "--margin")):
+        with pytest.raises(SystemExit, match=f"error: .*{words}"):
+            mod.main(argv)
+
 def _benchmark_module(name: str):
     import importlib.util
 
