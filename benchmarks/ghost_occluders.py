@@ -26,7 +26,6 @@ each choice the run made, not where a run without ghosts would have gone.
 from __future__ import annotations
 
 import argparse
-import collections
 import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -37,7 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from occupancy_errors import truth_maps  # noqa: E402  (the scene's true free floor and its clearance)
-from people_in_view import in_corridor  # noqa: E402  (the same corridor test)
+from people_in_view import in_corridor, print_runs  # noqa: E402  (the same corridor test and tables)
 from psnr_breakdown import logged_config  # noqa: E402  (the same reading of a run log)
 
 COLUMNS = ("run", "steps", "ghost voxels mean / max", "in corridor %", "choices", "changed %",
@@ -145,23 +144,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.margin < 0:
         sys.exit(f"error: bad --margin {args.margin}: must be >= 0 m")
-    from dynactivegs.errors import DagsError
-
-    header = "| " + " | ".join(COLUMNS) + " |\n" + "|---" * len(COLUMNS) + "|"
-    print(header, flush=True)
-    pooled: dict[str, GhostRecord] = collections.defaultdict(GhostRecord)
-    counts: collections.Counter = collections.Counter()
-    for path in args.mcap:
-        try:
-            label, preset, rec = ghost_record(path, args.margin)
-        except (DagsError, ValueError) as e:
-            sys.exit(f"error: {e}")
-        pooled[preset].extend(rec)
-        counts[preset] += 1
-        print(row(label, rec), flush=True)
-    print("\n" + header.replace("| run |", "| preset (runs) |"))
-    for preset, rec in pooled.items():
-        print(row(f"{preset} ({counts[preset]})", rec))
+    print_runs(COLUMNS, args.mcap, lambda path: ghost_record(path, args.margin), row, GhostRecord)
     return 0
 
 

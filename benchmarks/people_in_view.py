@@ -163,27 +163,37 @@ def row(label: str, s: dict[str, float]) -> str:
             f"(p {_f(s['rho_p'], '.2g')}) |")
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("mcap", nargs="+", type=Path, help="run logs (dagsrun --record, or dagsbench's OUT/runs/PRESET/)")
-    args = ap.parse_args(argv)
+def print_runs(columns: tuple[str, ...], paths: list[Path], read, row_of, empty) -> tuple[dict, collections.Counter]:
+    """Prints a Markdown table of ``columns`` with one row per run log, then the same table with each preset's runs
+    pooled; returns ({preset: pooled record}, {preset: runs}). ``read(path)`` gives (label, preset, record),
+    ``row_of(label, record)`` a row, ``empty()`` a record to pool into (by its ``extend``). A log that cannot be
+    read exits with its one-line error."""
     from dynactivegs.errors import DagsError
 
-    header = "| " + " | ".join(COLUMNS) + " |\n" + "|---" * len(COLUMNS) + "|"
+    header = "| " + " | ".join(columns) + " |\n" + "|---" * len(columns) + "|"
     print(header, flush=True)
-    pooled: dict[str, PeopleInView] = collections.defaultdict(PeopleInView)
+    pooled: dict = collections.defaultdict(empty)
     counts: collections.Counter = collections.Counter()
-    for path in args.mcap:
+    for path in paths:
         try:
-            label, preset, rec = people_in_view(path)
+            label, preset, rec = read(path)
         except (DagsError, ValueError) as e:
             sys.exit(f"error: {e}")
         pooled[preset].extend(rec)
         counts[preset] += 1
-        print(row(label, rec.summary()), flush=True)
+        print(row_of(label, rec), flush=True)
     print("\n" + header.replace("| run |", "| preset (runs) |"))
     for preset, rec in pooled.items():
-        print(row(f"{preset} ({counts[preset]})", rec.summary()))
+        print(row_of(f"{preset} ({counts[preset]})", rec))
+    return pooled, counts
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("mcap", nargs="+", type=Path, help="run logs (dagsrun --record, or dagsbench's OUT/runs/PRESET/)")
+    args = ap.parse_args(argv)
+    pooled, counts = print_runs(COLUMNS, args.mcap, people_in_view, lambda label, rec: row(label, rec.summary()),
+                                PeopleInView)
     print("\n| preset (runs) | median steps to arrival | sooner: arrivals, px %, rho (p) | later: arrivals, px %, "
           "rho (p) |\n|---|---|---|---|")
     for preset, rec in pooled.items():
