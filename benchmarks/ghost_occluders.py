@@ -117,7 +117,7 @@ def ghost_record(mcap: Path, margin_m: float) -> tuple[str, str, GhostRecord]:
                                abs(float(np.angle(np.exp(1j * (free.target_yaw_rad - sel.target_yaw_rad))))) > 1e-6)
             rec.corridor_logged += in_corridor(rooms, *sel.target_xy_m)
             rec.corridor_free += _new_target(free) and in_corridor(rooms, *free.target_xy_m)
-            if len(free.cand_gain) == len(sel.cand_gain):          # the same candidates (the graph is the map's)
+            if len(free.cand_gain) == len(sel.cand_gain):   # the same candidates: the graph is the occupancy grid's
                 rec.gain_logged += float(sel.cand_gain.sum())
                 rec.gain_free += float(free.cand_gain.sum())
         states = new_states
