@@ -82,6 +82,13 @@ def _new_target(sel) -> bool:
     return sel is not None and sel.target_reason != "keep" and sel.target_node >= 0
 
 
+def _same_target(a, b) -> bool:
+    """Whether selection outputs ``a`` and ``b`` hold the same target view (node and heading)."""
+    from dynactivegs.sim.robot import wrap_angle
+
+    return a.target_node == b.target_node and abs(wrap_angle(a.target_yaw_rad - b.target_yaw_rad)) < 1e-6
+
+
 def ghost_record(mcap: Path, margin_m: float) -> tuple[str, str, GhostRecord]:
     """(a label, the preset, the record of the module docstring) of one run log."""
     from dynactivegs import pipeline
@@ -107,14 +114,12 @@ def ghost_record(mcap: Path, margin_m: float) -> tuple[str, str, GhostRecord]:
         step_in = replace(logged, **after)
         new_states, out = pipeline.tick(cfg, step_in, states, first)
         sel = logged.selection
-        rec.replayed += int(out.selection.target_node == sel.target_node and
-                            np.allclose(out.selection.target_xy_m, sel.target_xy_m))
+        rec.replayed += int(_same_target(out.selection, sel))
         if _new_target(sel) and ghost.any():
             no_ghosts = replace(m, surface_ijk=np.ascontiguousarray(m.surface_ijk[~ghost]))
             free = pipeline.tick(cfg, replace(step_in, mapping=no_ghosts), states, first)[1].selection
             rec.choices += 1
-            rec.changed += int(free.target_node != sel.target_node or
-                               abs(float(np.angle(np.exp(1j * (free.target_yaw_rad - sel.target_yaw_rad))))) > 1e-6)
+            rec.changed += int(not _same_target(free, sel))
             rec.corridor_logged += in_corridor(rooms, *sel.target_xy_m)
             rec.corridor_free += _new_target(free) and in_corridor(rooms, *free.target_xy_m)
             if len(free.cand_gain) == len(sel.cand_gain):   # the same candidates: the graph is the occupancy grid's
