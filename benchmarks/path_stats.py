@@ -67,11 +67,19 @@ DETOUR_TOL = 0.05
 """A held path more than this fraction longer than the shortest graph path between its end nodes is a detour."""
 
 
-def blocked_episodes(blocked: np.ndarray, gap: int = EPISODE_GAP) -> int:
-    """The number of episodes in the per-step ``blocked`` flags: runs of blocked steps, merged when at most
-    ``gap`` unblocked steps lie between two."""
+def episode_spans(blocked: np.ndarray, gap: int = EPISODE_GAP) -> list[tuple[int, int]]:
+    """The episodes in the per-step ``blocked`` flags as (first, last) blocked step: runs of blocked steps, merged
+    when at most ``gap`` unblocked steps lie between two."""
     idx = np.flatnonzero(blocked)
-    return int(len(idx) > 0) + int((np.diff(idx) > gap + 1).sum())
+    if len(idx) == 0:
+        return []
+    breaks = np.flatnonzero(np.diff(idx) > gap + 1)
+    return [(int(a), int(b)) for a, b in zip(np.r_[idx[0], idx[breaks + 1]], np.r_[idx[breaks], idx[-1]])]
+
+
+def blocked_episodes(blocked: np.ndarray, gap: int = EPISODE_GAP) -> int:
+    """The number of episodes in the per-step ``blocked`` flags (:func:`episode_spans`)."""
+    return len(episode_spans(blocked, gap))
 
 
 def cycle_rank(n_nodes: int, edges: np.ndarray) -> int:

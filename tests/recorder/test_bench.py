@@ -303,6 +303,83 @@ def test_ghost_occluders_re_runs_each_choice_without_the_ghosts(finished, capsys
         with pytest.raises(SystemExit, match=f"error: .*{words}"):
             mod.main(argv)
 
+def test_blocked_episodes_tells_a_person_ahead_from_a_wall():
+    """A made-up step: the forward step blocked by a person (their pixels in the truth mask), by the room's wall, by
+    nothing in view (a remembered block), a turn-away (no re-plan), and a step that was not blocked."""
+    from types import SimpleNamespace as NS
+
+    from dynactivegs.planning.actions import ActionConfig
+    from tests.selection.scenes import intrinsics, render_depth, view
+
+    mod = _benchmark_module("blocked_episodes")
+    acfg, K = ActionConfig(), intrinsics(64, 36)
+    plan = NS(blocked=True, replanned=True)
+
+    def step(x, boxes=()):
+        T = view(x, 1.5, 0.0)
+        depth, which = render_depth(T, K, 64, 36, (4.0, 3.0), list(boxes))
+        return NS(depth_m=depth, K=K, T_world_cam=T), NS(people_mask=which == 0)
+
+    person = (2.3, 1.35, 2.6, 1.65, 1.75)
+    assert mod.step_cause(plan, *step(2.0, [person]), acfg) == "person"           # 0.3 m ahead
+    assert mod.step_cause(plan, *step(3.7), acfg) == "static"                     # the wall 0.3 m ahead
+    assert mod.step_cause(plan, *step(1.0), acfg) == "remembered"                 # nothing within a step
+    assert mod.step_cause(NS(blocked=True, replanned=False), *step(2.0, [person]), acfg) == "evade"
+    assert mod.step_cause(NS(blocked=False, replanned=True), *step(3.7), acfg) is None
+    assert mod.step_cause(None, *step(3.7), acfg) is None
+
+
+def test_blocked_episodes_groups_steps_and_finds_what_became_of_the_target(monkeypatch):
+    """Made-up steps: two hold-ups (a person, then a wall with a remembered step), each with the selection's next
+    new target as its outcome; steps near a person counted from the truth; the corridor from the scene's rooms."""
+    from types import SimpleNamespace as NS
+
+    from dynactivegs.sim.procedural import Room
+
+    mod = _benchmark_module("blocked_episodes")
+    causes = [None, "person", None, "person", None, None, None, None, None, None, "static", "remembered", None, None]
+    reasons = ["keep"] * 14
+    reasons[5], reasons[13] = "reached", "unreachable"
+    monkeypatch.setattr(mod, "step_cause", lambda plan, frame, truth, acfg: plan)
+    rooms = [Room("c", "corridor", 0.0, 0.0, 1.0, 3.0), Room("r", "living", 1.0, 0.0, 4.0, 3.0)]
+    steps = []
+    for k, (c, r) in enumerate(zip(causes, reasons)):
+        x = 0.5 if k < 8 else 2.0                                   # in the corridor, then in the room
+        people = np.array([[x + 1.0, 1.0]]) if k % 2 else np.zeros((0, 2))   # 1 m away on odd steps
+        truth = NS(robot=NS(x_m=x, y_m=1.0), people_xy_m=people)
+        steps.append((None, truth, c, NS(target_reason=r)))
+    rec = mod.record_of(steps, rooms, None, gap=5)
+    assert rec.steps == 14 and rec.near == 7 and rec.causes == ["person", "person", "static", "remembered"]
+    assert rec.episodes == [("person", 2, True, "reached"), ("static", 2, False, "unreachable")]
+    s = rec.summary()
+    assert s["ep_person"] == s["ep_static"] == 1 and s["ep_other"] == 0 and s["per_episode"] == 2.0
+    assert s["corridor_pct"] == s["given_up_pct"] == s["reached_pct"] == 50.0
+    assert s["person_rate"] == pytest.approx(100.0 / 7)
+    assert mod.record_of(steps[:1], rooms, None).episodes == []                     # nothing blocked
+
+
+def test_blocked_episodes_reads_every_blocked_step_of_a_log(finished, capsys):
+    """benchmarks/blocked_episodes.py on the sweep's runs: one cause per logged blocked step, pooled per preset; a
+    missing log is one line."""
+    from replay.source import LogReader
+
+    out, _ = finished
+    mod = _benchmark_module("blocked_episodes")
+    logs = [out / "runs" / p / "tiny-00-seed0.mcap" for p in ("baseline", "full")]
+    for log in logs:
+        label, preset, rec = mod.blocked_record(log)
+        steps = list(LogReader(log).steps())
+        assert label == f"{preset} tiny-00 seed 0" and rec.steps == len(steps) == 6
+        assert len(rec.causes) == sum(bool(st["/planning"].blocked) for st in steps)
+        assert set(rec.causes) <= set(mod.STEP_CAUSES) and len(rec.episodes) <= len(rec.causes)
+    assert mod.main([str(log) for log in logs]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[0].startswith("| run | steps | blocked: person") and printed[2].startswith("| baseline tiny-00")
+    assert printed[5].startswith("| preset (runs) |") and printed[7].startswith("| baseline (1) | 6 |")
+    with pytest.raises(SystemExit, match="error: .*missing.mcap"):
+        mod.main([str(out / "missing.mcap")])
+
+
 def _benchmark_module(name: str):
     import importlib.util
 
