@@ -22,7 +22,14 @@ began with the robot in a **corridor** room (procedural scenes); the share whose
 (the selection's next new target, within the episode or ``EPISODE_GAP`` steps after it, replaced it as
 unreachable, stuck or timed out; ``reached`` ones are counted too); the steps with a person within
 ``path_stats.NEAR_M`` of the robot (how much crowd the path met) and the person episodes per 100 of them (how
-often meeting someone became a hold-up). A second table pools each preset's runs.
+often meeting someone became a hold-up). Two more columns say whether the people met were in the map the planner
+drives by (the selection's occupancy grid): **people px let in %**, the share of the frames' people pixels whose
+uncertainty beta was at most ``selection.occupancy.beta_max`` (such returns become obstacles in the grid; above it
+they only clear space), and **close people in the grid %**, over the steps and people standing within the
+selection's logged clearance window (``SelectionOut.local_clear_m``, about 0.6 m round the robot) in the open
+(farther than their radius and ``OPEN_M`` from the scene's own obstacles), the share the grid held as an obstacle
+(a known obstacle within their radius of their centre), so that the planner could steer round them before the
+collision check had to stop the robot. A second table pools each preset's runs.
 
 Two presets with the same selection and planner that are held up differently are told apart here: by meeting
 more people (more steps near people at the same rate), by meeting them worse (a higher rate), or by aiming at
@@ -42,6 +49,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from occupancy_errors import truth_maps  # noqa: E402  (the scene's true free floor and its clearance)
 from path_stats import EPISODE_GAP, GIVE_UP, NEAR_M, episode_spans  # noqa: E402  (the same episodes)
 from people_in_view import _f, in_corridor, print_runs  # noqa: E402  (the same rooms and tables)
 from psnr_breakdown import logged_config  # noqa: E402  (the same reading of a run log)
@@ -50,9 +58,24 @@ STEP_CAUSES = ("person", "static", "remembered", "evade")
 EPISODE_CAUSES = ("person", "static", "other")
 COLUMNS = ("run", "steps", "blocked: person / static / remembered / evade", "episodes: person / static / other",
            "blocked per episode", "in corridor %", "given up / reached %", "steps near people",
-           "person episodes per 100 near")
+           "person episodes per 100 near", "people px let in %", "close people in the grid %")
 PERSON_SHARE = 0.5
 """A seen block is a person's when at least this share of the returns in the swept box are people pixels."""
+OPEN_M = 0.1
+"""A person counts for the grid column only when at least their radius and this far from the scene's obstacles."""
+
+
+@dataclass(frozen=True)
+class Setting:
+    """What one run's steps are measured against: the scene's rooms, the run's ActionConfig and occupancy
+    beta_max, the truth map (FreeSpace and its free cells' clearance, m) and the people's radius (m)."""
+
+    rooms: list
+    acfg: object
+    beta_max: float
+    fs: object
+    clear_m: np.ndarray
+    person_m: float
 
 
 @dataclass
@@ -61,12 +84,16 @@ class BlockedRecord:
 
     steps: int = 0
     near: int = 0                                                   # steps with a person within NEAR_M
+    people_px: int = 0                                              # people pixels over all frames
+    let_in_px: int = 0                                              # of them with beta <= beta_max
+    close: int = 0                                                  # (step, person) in the window, in the open
+    in_grid: int = 0                                                # of them held as an obstacle
     causes: list[str] = field(default_factory=list)                 # per blocked step
     episodes: list[tuple[str, int, bool, str]] = field(default_factory=list)   # (cause, blocked, corridor, outcome)
 
     def extend(self, other: "BlockedRecord") -> None:
-        self.steps += other.steps
-        self.near += other.near
+        for name in ("steps", "near", "people_px", "let_in_px", "close", "in_grid"):
+            setattr(self, name, getattr(self, name) + getattr(other, name))
         self.causes.extend(other.causes)
         self.episodes.extend(other.episodes)
 
@@ -81,7 +108,9 @@ class BlockedRecord:
                 "corridor_pct": pct(sum(e[2] for e in self.episodes)),
                 "given_up_pct": pct(sum(e[3] in GIVE_UP for e in self.episodes)),
                 "reached_pct": pct(sum(e[3] == "reached" for e in self.episodes)),
-                "person_rate": 100.0 * eps["person"] / self.near if self.near else float("nan")}
+                "person_rate": 100.0 * eps["person"] / self.near if self.near else float("nan"),
+                "let_in_pct": 100.0 * self.let_in_px / self.people_px if self.people_px else float("nan"),
+                "in_grid_pct": 100.0 * self.in_grid / self.close if self.close else float("nan")}
 
 
 def step_cause(plan, frame, truth, acfg) -> str | None:
@@ -99,16 +128,39 @@ def step_cause(plan, frame, truth, acfg) -> str | None:
     return "person" if truth.people_mask.ravel()[hits].mean() >= PERSON_SHARE else "static"
 
 
-def record_of(steps, rooms, acfg, gap: int = EPISODE_GAP) -> BlockedRecord:
-    """The record of one run from its steps, each ``(frame, truth, planning, selection)`` (the last two may be
-    None: a stage that did not run), the scene's rooms and the run's ActionConfig."""
+def close_people(sel, truth, setting: Setting) -> tuple[int, int]:
+    """(people in the selection's clearance window standing in the open, how many of them the grid held as an
+    obstacle) at one step: the module docstring's grid column."""
+    if sel is None or sel.local_clear_m.size == 0:
+        return 0, 0
+    size, fs = sel.local_clear_m.shape[0], setting.fs
+    j, i = np.floor((truth.people_xy_m - sel.local_origin_xy_m) / sel.local_cell_m).astype(np.int64).T
+    tc, tr = np.floor((truth.people_xy_m - np.asarray(fs.origin_xy_m)) / fs.res_m).astype(np.int64).T
+    rows, cols = setting.clear_m.shape
+    on_map = (tr >= 0) & (tr < rows) & (tc >= 0) & (tc < cols)
+    open_ = on_map & (setting.clear_m[np.clip(tr, 0, rows - 1), np.clip(tc, 0, cols - 1)]
+                      > setting.person_m + OPEN_M)
+    close = open_ & (i >= 0) & (i < size) & (j >= 0) & (j < size)
+    held = sel.local_clear_m[i[close], j[close]] <= setting.person_m
+    return int(close.sum()), int(held.sum())
+
+
+def record_of(steps, setting: Setting, gap: int = EPISODE_GAP) -> BlockedRecord:
+    """The record of one run from its steps, each ``(frame, truth, perception, planning, selection)`` (the last
+    three may be None: a stage that did not run), measured against ``setting``."""
     rec, causes, corridor, reasons = BlockedRecord(), [], [], []
-    for frame, truth, plan, sel in steps:
+    for frame, truth, perception, plan, sel in steps:
         rec.steps += 1
         robot = np.array([truth.robot.x_m, truth.robot.y_m])
         rec.near += bool((np.hypot(*(truth.people_xy_m - robot).T) < NEAR_M).any())   # (P, 2), P may be 0
-        causes.append(step_cause(plan, frame, truth, acfg))
-        corridor.append(in_corridor(rooms, *robot))
+        if perception is not None:
+            rec.people_px += int(truth.people_mask.sum())
+            rec.let_in_px += int((perception.beta[truth.people_mask] <= setting.beta_max).sum())
+        close, held = close_people(sel, truth, setting)
+        rec.close += close
+        rec.in_grid += held
+        causes.append(step_cause(plan, frame, truth, setting.acfg))
+        corridor.append(in_corridor(setting.rooms, *robot))
         reasons.append(None if sel is None or sel.target_reason == "keep" else sel.target_reason)
     rec.causes = [c for c in causes if c is not None]
     for a, b in episode_spans(np.array([c is not None for c in causes]), gap):
@@ -126,8 +178,11 @@ def blocked_record(mcap: Path) -> tuple[str, str, BlockedRecord]:
 
     reader = LogReader(mcap)
     cfg = logged_config(reader, mcap)
-    rec = record_of(((st["/frame"], st["/truth"], st.get("/planning"), st.get("/selection")) for st in reader.steps()),
-                    load_scene(cfg.sim).rooms, cfg.planning.actions)
+    fs, clear_m, _ = truth_maps(cfg.sim)
+    setting = Setting(load_scene(cfg.sim).rooms, cfg.planning.actions, cfg.selection.occupancy.beta_max, fs, clear_m,
+                      cfg.sim.crowd.radius_m)
+    rec = record_of(((st["/frame"], st["/truth"], st.get("/perception"), st.get("/planning"), st.get("/selection"))
+                     for st in reader.steps()), setting)
     if not rec.steps:
         raise ValueError(f"{mcap}: the log holds no whole step; pass the .mcap of a run that took at least one")
     preset = reader.metadata.get("preset", "?")
@@ -139,7 +194,7 @@ def row(label: str, rec: BlockedRecord) -> str:
     return (f"| {label} | {s['steps']} | " + " / ".join(str(s[f'blocked_{c}']) for c in STEP_CAUSES) + " | "
             + " / ".join(str(s[f'ep_{c}']) for c in EPISODE_CAUSES) + f" | {_f(s['per_episode'], '.1f')} | "
             f"{_f(s['corridor_pct'], '.0f')} | {_f(s['given_up_pct'], '.0f')} / {_f(s['reached_pct'], '.0f')} | "
-            f"{s['near']} | {_f(s['person_rate'], '.1f')} |")
+            f"{s['near']} | {_f(s['person_rate'], '.1f')} | {_f(s['let_in_pct'], '.1f')} | {_f(s['in_grid_pct'], '.1f')} |")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -331,7 +331,8 @@ def test_blocked_episodes_tells_a_person_ahead_from_a_wall():
 
 def test_blocked_episodes_groups_steps_and_finds_what_became_of_the_target(monkeypatch):
     """Made-up steps: two hold-ups (a person, then a wall with a remembered step), each with the selection's next
-    new target as its outcome; steps near a person counted from the truth; the corridor from the scene's rooms."""
+    new target as its outcome; steps near a person from the truth; the corridor from the scene's rooms; the people
+    pixels let into the grid by their beta; a close person in the open held by the grid or not."""
     from types import SimpleNamespace as NS
 
     from dynactivegs.sim.procedural import Room
@@ -342,20 +343,39 @@ def test_blocked_episodes_groups_steps_and_finds_what_became_of_the_target(monke
     reasons[5], reasons[13] = "reached", "unreachable"
     monkeypatch.setattr(mod, "step_cause", lambda plan, frame, truth, acfg: plan)
     rooms = [Room("c", "corridor", 0.0, 0.0, 1.0, 3.0), Room("r", "living", 1.0, 0.0, 4.0, 3.0)]
+    fs = NS(origin_xy_m=np.zeros(2), res_m=0.1, shape=(30, 40))
+    clear_m = np.full((30, 40), 1.0)
+    clear_m[:, 35:] = 0.2                                          # near a wall: x >= 3.5 is not in the open
+    setting = mod.Setting(rooms, None, 0.75, fs, clear_m, 0.3)
+    mask = np.zeros((2, 2), bool)
+    mask[0] = True                                                 # two people pixels per frame
+    perception = NS(beta=np.array([[0.5, 0.9], [0.1, 0.1]], np.float32))   # one of them let in (beta <= 0.75)
+    window = np.full((3, 3), 0.6, np.float32)
+    window[1, 2] = 0.1                                             # an obstacle held 0.5 m ahead of the robot
     steps = []
     for k, (c, r) in enumerate(zip(causes, reasons)):
         x = 0.5 if k < 8 else 2.0                                   # in the corridor, then in the room
-        people = np.array([[x + 1.0, 1.0]]) if k % 2 else np.zeros((0, 2))   # 1 m away on odd steps
-        truth = NS(robot=NS(x_m=x, y_m=1.0), people_xy_m=people)
-        steps.append((None, truth, c, NS(target_reason=r)))
-    rec = mod.record_of(steps, rooms, None, gap=5)
+        people = np.array([[x + 0.5, 1.0]]) if k % 2 else np.zeros((0, 2))   # 0.5 m ahead on odd steps
+        truth = NS(robot=NS(x_m=x, y_m=1.0), people_xy_m=people, people_mask=mask)
+        sel = NS(target_reason=r, local_clear_m=window, local_origin_xy_m=np.array([x - 0.75, 0.25]),
+                 local_cell_m=0.5)
+        steps.append((None, truth, perception, c, sel))
+    rec = mod.record_of(steps, setting, gap=5)
     assert rec.steps == 14 and rec.near == 7 and rec.causes == ["person", "person", "static", "remembered"]
     assert rec.episodes == [("person", 2, True, "reached"), ("static", 2, False, "unreachable")]
     s = rec.summary()
     assert s["ep_person"] == s["ep_static"] == 1 and s["ep_other"] == 0 and s["per_episode"] == 2.0
     assert s["corridor_pct"] == s["given_up_pct"] == s["reached_pct"] == 50.0
-    assert s["person_rate"] == pytest.approx(100.0 / 7)
-    assert mod.record_of(steps[:1], rooms, None).episodes == []                     # nothing blocked
+    assert s["person_rate"] == pytest.approx(100.0 / 7) and s["let_in_pct"] == 50.0
+    assert rec.close == 7 and rec.in_grid == 7                      # every odd step's person, held
+    ahead = NS(robot=NS(x_m=2.0, y_m=1.0), people_xy_m=np.array([[2.5, 1.0], [1.5, 1.0], [2.6, 2.6]]))
+    sel = NS(local_clear_m=window, local_origin_xy_m=np.array([1.25, 0.25]), local_cell_m=0.5)
+    assert mod.close_people(sel, ahead, setting) == (2, 1)          # ahead: held; behind: not; off the window
+    wall = NS(robot=NS(x_m=3.2, y_m=1.0), people_xy_m=np.array([[3.7, 1.0]]))
+    assert mod.close_people(NS(local_clear_m=window, local_origin_xy_m=np.array([2.45, 0.25]), local_cell_m=0.5),
+                            wall, setting) == (0, 0)                # by the wall: not in the open
+    assert mod.close_people(NS(local_clear_m=np.zeros((0, 0))), ahead, setting) == (0, 0)
+    assert mod.record_of(steps[:1], setting).episodes == []                         # nothing blocked
 
 
 def test_blocked_episodes_reads_every_blocked_step_of_a_log(finished, capsys):
