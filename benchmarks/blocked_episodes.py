@@ -189,6 +189,20 @@ def blocked_record(mcap: Path) -> tuple[str, str, BlockedRecord]:
     return f"{preset} {cfg.sim.scene} seed {cfg.seed}", preset, rec
 
 
+def let_in_correlations(runs: list[tuple[str, dict[str, float]]]) -> dict[str, tuple[float, float, int]]:
+    """Spearman (rho, p, runs) of the people px let in with the person episodes per 100 near steps over ``runs``
+    (preset, summary): over all of them ("all runs") and within each preset; nan where fewer than 3 runs have
+    both, or one side is constant."""
+    from people_in_view import _rho
+
+    out = {}
+    for name in ("all runs", *dict.fromkeys(p for p, _ in runs)):
+        pairs = np.array([(s["let_in_pct"], s["person_rate"]) for p, s in runs if name in ("all runs", p)
+                          and np.isfinite(s["let_in_pct"]) and np.isfinite(s["person_rate"])]).reshape(-1, 2)
+        out[name] = (*_rho(pairs[:, 0], pairs[:, 1]), len(pairs))
+    return out
+
+
 def row(label: str, rec: BlockedRecord) -> str:
     s = rec.summary()
     return (f"| {label} | {s['steps']} | " + " / ".join(str(s[f'blocked_{c}']) for c in STEP_CAUSES) + " | "
@@ -201,7 +215,17 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("mcap", nargs="+", type=Path, help="run logs (dagsrun --record, or dagsbench's OUT/runs/PRESET/)")
     args = ap.parse_args(argv)
-    print_runs(COLUMNS, args.mcap, blocked_record, row, BlockedRecord)
+    runs: list[tuple[str, dict[str, float]]] = []
+
+    def read(path: Path) -> tuple[str, str, BlockedRecord]:
+        label, preset, rec = blocked_record(path)
+        runs.append((preset, rec.summary()))
+        return label, preset, rec
+
+    print_runs(COLUMNS, args.mcap, read, row, BlockedRecord)
+    print("\nrank correlation (Spearman) over runs of people px let in with person episodes per 100 near: "
+          + "; ".join(f"{name} {_f(rho, '+.2f')} (p {_f(p, '.2g')}, {n} runs)"
+                      for name, (rho, p, n) in let_in_correlations(runs).items()))
     return 0
 
 

@@ -396,8 +396,22 @@ def test_blocked_episodes_reads_every_blocked_step_of_a_log(finished, capsys):
     printed = capsys.readouterr().out.splitlines()
     assert printed[0].startswith("| run | steps | blocked: person") and printed[2].startswith("| baseline tiny-00")
     assert printed[5].startswith("| preset (runs) |") and printed[7].startswith("| baseline (1) | 6 |")
+    assert printed[-1].startswith("rank correlation") and "all runs - (p -, " in printed[-1]   # too few runs
     with pytest.raises(SystemExit, match="error: .*missing.mcap"):
         mod.main([str(out / "missing.mcap")])
+
+
+def test_blocked_episodes_correlates_letting_people_in_with_hold_ups_over_runs_and_within_presets():
+    """Over all runs a preset that lets more people in and is held up less gives a negative rho; within each preset
+    its own runs' order decides; fewer than 3 runs, or an undefined rate, give nan."""
+    mod = _benchmark_module("blocked_episodes")
+    run = (lambda preset, let_in, rate: (preset, {"let_in_pct": let_in, "person_rate": rate}))
+    runs = [run("a", 10.0, 1.0), run("a", 11.0, 1.1), run("a", 12.0, 1.2),
+            run("b", 1.0, 3.0), run("b", 2.0, 3.1), run("b", 3.0, 3.2), run("c", 5.0, float("nan"))]
+    out = mod.let_in_correlations(runs)
+    assert out["all runs"][0] < -0.5 and out["all runs"][2] == 6
+    assert out["a"][0] == pytest.approx(1.0) and out["b"][0] == pytest.approx(1.0) and out["a"][2] == 3
+    assert np.isnan(out["c"][0]) and out["c"][2] == 0
 
 
 def _benchmark_module(name: str):
