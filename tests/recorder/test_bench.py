@@ -383,9 +383,8 @@ def test_blocked_episodes_reads_every_blocked_step_of_a_log(finished, capsys):
     missing log is one line."""
     from replay.source import LogReader
 
-    out, _ = finished
+    out, logs = _sweep_logs(finished)
     mod = _benchmark_module("blocked_episodes")
-    logs = [out / "runs" / p / "tiny-00-seed0.mcap" for p in ("baseline", "full")]
     for log in logs:
         label, preset, rec = mod.blocked_record(log)
         steps = list(LogReader(log).steps())
@@ -412,6 +411,12 @@ def test_blocked_episodes_correlates_letting_people_in_with_hold_ups_over_runs_a
     assert out["all runs"][0] < -0.5 and out["all runs"][2] == 6
     assert out["a"][0] == pytest.approx(1.0) and out["b"][0] == pytest.approx(1.0) and out["a"][2] == 3
     assert np.isnan(out["c"][0]) and out["c"][2] == 0
+
+
+def _sweep_logs(finished):
+    """The sweep's folder and its two tiny-00 seed-0 run logs, of `baseline` and `full`."""
+    out, _ = finished
+    return out, [out / "runs" / p / "tiny-00-seed0.mcap" for p in ("baseline", "full")]
 
 
 def _benchmark_module(name: str):
@@ -694,9 +699,8 @@ def test_people_in_view_splits_the_logged_people_pixels(finished, capsys):
     R_m ranks of scored choices in [0, 1]; pooled per preset; a missing log is one line."""
     from replay.source import LogReader
 
-    out, _ = finished
+    out, logs = _sweep_logs(finished)
     mod = _benchmark_module("people_in_view")
-    logs = [out / "runs" / p / "tiny-00-seed0.mcap" for p in ("baseline", "full")]
     for log in logs:
         label, preset, rec = mod.people_in_view(log)
         steps = list(LogReader(log).steps())
