@@ -49,7 +49,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from occupancy_errors import truth_maps  # noqa: E402  (the scene's true free floor and its clearance)
+from occupancy_errors import truth_cell, truth_maps  # noqa: E402  (the scene's true free floor, its clearance)
 from path_stats import EPISODE_GAP, GIVE_UP, NEAR_M, episode_spans  # noqa: E402  (the same episodes)
 from people_in_view import _f, in_corridor, print_runs  # noqa: E402  (the same rooms and tables)
 from psnr_breakdown import logged_config  # noqa: E402  (the same reading of a run log)
@@ -133,13 +133,10 @@ def close_people(sel, truth, setting: Setting) -> tuple[int, int]:
     obstacle) at one step: the module docstring's grid column."""
     if sel is None or sel.local_clear_m.size == 0:
         return 0, 0
-    size, fs = sel.local_clear_m.shape[0], setting.fs
+    size = sel.local_clear_m.shape[0]
     j, i = np.floor((truth.people_xy_m - sel.local_origin_xy_m) / sel.local_cell_m).astype(np.int64).T
-    tc, tr = np.floor((truth.people_xy_m - np.asarray(fs.origin_xy_m)) / fs.res_m).astype(np.int64).T
-    rows, cols = setting.clear_m.shape
-    on_map = (tr >= 0) & (tr < rows) & (tc >= 0) & (tc < cols)
-    open_ = on_map & (setting.clear_m[np.clip(tr, 0, rows - 1), np.clip(tc, 0, cols - 1)]
-                      > setting.person_m + OPEN_M)
+    on_map, row, col = truth_cell(setting.fs, truth.people_xy_m)
+    open_ = on_map & (setting.clear_m[row, col] > setting.person_m + OPEN_M)
     close = open_ & (i >= 0) & (i < size) & (j >= 0) & (j < size)
     held = sel.local_clear_m[i[close], j[close]] <= setting.person_m
     return int(close.sum()), int(held.sum())
@@ -208,7 +205,8 @@ def row(label: str, rec: BlockedRecord) -> str:
     return (f"| {label} | {s['steps']} | " + " / ".join(str(s[f'blocked_{c}']) for c in STEP_CAUSES) + " | "
             + " / ".join(str(s[f'ep_{c}']) for c in EPISODE_CAUSES) + f" | {_f(s['per_episode'], '.1f')} | "
             f"{_f(s['corridor_pct'], '.0f')} | {_f(s['given_up_pct'], '.0f')} / {_f(s['reached_pct'], '.0f')} | "
-            f"{s['near']} | {_f(s['person_rate'], '.1f')} | {_f(s['let_in_pct'], '.1f')} | {_f(s['in_grid_pct'], '.1f')} |")
+            f"{s['near']} | {_f(s['person_rate'], '.1f')} | {_f(s['let_in_pct'], '.1f')} | "
+            f"{_f(s['in_grid_pct'], '.1f')} |")
 
 
 def main(argv: list[str] | None = None) -> int:

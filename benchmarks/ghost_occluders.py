@@ -35,7 +35,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from occupancy_errors import truth_maps  # noqa: E402  (the scene's true free floor and its clearance)
+from occupancy_errors import truth_cell, truth_maps  # noqa: E402  (the scene's true free floor, its clearance)
 from people_in_view import in_corridor, print_runs  # noqa: E402  (the same corridor test and tables)
 from psnr_breakdown import logged_config  # noqa: E402  (the same reading of a run log)
 
@@ -71,10 +71,8 @@ def ghost_voxels(surface_ijk: np.ndarray, voxel_m: float, fs, clear_m: np.ndarra
     truth map ``fs`` (origin_xy_m, res_m, shape (rows, cols)) whose free cells are ``clear_m`` (rows, cols) metres
     from the nearest obstacle (0 off the free floor)."""
     c = (surface_ijk.astype(np.float64) + 0.5) * voxel_m
-    t = np.floor((c[:, :2] - np.asarray(fs.origin_xy_m)) / fs.res_m).astype(np.int64)     # (col, row)
-    rows, cols = fs.shape
-    inside = (t[:, 0] >= 0) & (t[:, 0] < cols) & (t[:, 1] >= 0) & (t[:, 1] < rows)
-    clear = clear_m[np.clip(t[:, 1], 0, rows - 1), np.clip(t[:, 0], 0, cols - 1)]
+    inside, row, col = truth_cell(fs, c[:, :2])
+    clear = clear_m[row, col]
     return inside & (clear > 0) & (clear >= margin_m) & (c[:, 2] > HEIGHT_M[0]) & (c[:, 2] < HEIGHT_M[1])
 
 

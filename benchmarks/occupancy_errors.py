@@ -48,16 +48,23 @@ def truth_maps(sim_cfg) -> tuple[object, np.ndarray, np.ndarray]:
     return fs, distance_transform_edt(free) * fs.res_m, distance_transform_edt(~free) * fs.res_m
 
 
+def truth_cell(fs, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(whether on the map, row, column) of the cells of the truth map ``fs`` (origin_xy_m, res_m, shape (rows,
+    cols)) that hold the points ``xy`` (..., 2); row and column are clipped into the map, so they index its arrays
+    also where the point is off it."""
+    t = np.floor((np.asarray(xy, np.float64) - np.asarray(fs.origin_xy_m)) / fs.res_m).astype(np.int64)  # (col, row)
+    rows, cols = fs.shape
+    inside = (t[..., 0] >= 0) & (t[..., 0] < cols) & (t[..., 1] >= 0) & (t[..., 1] < rows)
+    return inside, np.clip(t[..., 1], 0, rows - 1), np.clip(t[..., 0], 0, cols - 1)
+
+
 def grid_errors(grid, occ_cfg, fs, clear_m: np.ndarray, inside_m: np.ndarray, margin_m: float) -> dict[str, float]:
     """false occupied / false free areas (m2) and the known share (%) of the true free floor of one grid."""
     states = grid.states(occ_cfg)
     h, w = grid.shape
     ii, jj = np.meshgrid(np.arange(h), np.arange(w), indexing="ij")
     xy = grid.cell_to_world(np.stack([ii, jj], axis=-1))
-    t = np.floor((xy - fs.origin_xy_m) / fs.res_m).astype(np.int64)       # (col, row) of the truth map
-    th, tw = fs.shape
-    ok = (t[..., 0] >= 0) & (t[..., 0] < tw) & (t[..., 1] >= 0) & (t[..., 1] < th)
-    r, c = np.clip(t[..., 1], 0, th - 1), np.clip(t[..., 0], 0, tw - 1)
+    ok, r, c = truth_cell(fs, xy)
     cell_area = grid.cell_m ** 2
     true_free = ok & (clear_m[r, c] > 0)
     false_occ = ok & (clear_m[r, c] >= margin_m) & (states == 2)
