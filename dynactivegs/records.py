@@ -205,7 +205,8 @@ class SelectionOut:
     ``""`` in logs older than schema version 6.
     ``local_clear_m`` is the known free space around the robot for the planner's last metre: each
     cell's distance to the nearest occupied cell of the occupancy grid or kept bump disc (the
-    measure of ``node_leg_clear``), capped where obstacles farther out were not looked for.
+    measure of ``node_leg_clear``), or with ``selection.local_people_steps`` of a cell holding one of the
+    last frames' people returns, capped where obstacles farther out were not looked for.
     """
 
     target_xy_m: np.ndarray       # float64 (2,)

@@ -40,6 +40,10 @@ in front of something the camera sees also leaves a disc there, like a bump disc
 target's way to avoid (``stuck_disc``): people who wait for a robot in a corridor while it waits
 for them are freed only when it leaves.
 
+The planner's near view. ``SelectionOut.local_clear_m`` is the distance to the grid's obstacles and
+kept discs in a window around the robot, for steering its next steps; with ``local_people_steps`` the people
+returns (beta above ``occupancy.beta_max``) of the last few frames count there too.
+
 The robot's node. The graph's edges keep clear of the grid's obstacles, but the way from the
 robot to its first node is a straight line, and the nearest node can lie across an obstacle
 (say one too low for the camera to see when near). ``SelectionOut.node_leg_clear``
@@ -68,7 +72,7 @@ from dynactivegs.fields.project import FloorMap, motion_floor_map
 from dynactivegs.planning.actions import ActionConfig, forward_blocked, forward_hits
 from dynactivegs.planning.paths import dijkstra, edge_cost
 from dynactivegs.records import FieldsOut, Frame, SelectionOut, StepRecord, robot_pose_of
-from dynactivegs.selection.occupancy import OccupancyConfig, OccupancyGrid, update_occupancy
+from dynactivegs.selection.occupancy import OccupancyConfig, OccupancyGrid, backproject, update_occupancy
 from dynactivegs.selection.subregions import SubregionConfig, Subregions, cluster_subregions
 from dynactivegs.selection.visibility import (VisibilityConfig, bin_gains, column_occluders, occluder_grid,
                                                view_gains)
@@ -338,9 +342,19 @@ class SelectionConfig:
     forward step against it; the step's end lies 0.25 m away and the robot's edge 0.18 m further. 0: no
     window (the planner steers by its path alone)."""
 
+    local_people_steps: int = 0
+    """``SelectionOut.local_clear_m`` also counts the returns of the last this many frames (this one included)
+    that lie in the obstacle band (occupancy.band_lo_m to band_hi_m) with beta above occupancy.beta_max, people
+    most likely, as obstacles: the planner steers its forward steps clear of a person it has just seen as it
+    does of a wall. They never enter the occupancy grid, the graph or the leg check, so a person cuts no way
+    and leaves nothing behind once they walk on. More than one frame: a robot turning away from a person
+    beside it loses them at the edge of the field of view, and with this frame's returns alone it turned back
+    toward them at the next step, back and forth. 0: the window holds the grid's obstacles alone."""
+
     def __post_init__(self) -> None:
         check_config(self.variant in SELECTION_VARIANTS, "selection.variant", self.variant,
                      f"one of {SELECTION_VARIANTS}")
+        check_config(self.local_people_steps >= 0, "selection.local_people_steps", self.local_people_steps, ">= 0")
         for name in ("l_r", "l_c", "turn_cost_m", "motion_weight", "l_d", "l_v", "stand_weight"):
             check_config(getattr(self, name) >= 0.0, f"selection.{name}", getattr(self, name), ">= 0")
         check_config(math.isfinite(self.local_threshold), "selection.local_threshold", self.local_threshold, "finite")
@@ -417,6 +431,7 @@ class SelectionState:
     bumps: tuple[tuple[float, float, int], ...] = ()   # (x, y, kept until this step): bump discs' centres
     jams: tuple[tuple[float, float, int], ...] = ()    # (x, y, kept until this step): stuck discs' centres
     local_until: int = -1         # new targets come from the robot's subregion before this step (cut_hold_local)
+    people: tuple[tuple[int, np.ndarray], ...] = ()   # (step, int64 (N, 2) world cells x, y): people returns kept
 
     def __post_init__(self) -> None:
         self.history_xy_m.flags.writeable = False
@@ -641,11 +656,25 @@ def _leg_clear(cfg: SelectionConfig, grid: OccupancyGrid, robot_xy: np.ndarray, 
     return ~low
 
 
-def _local_clearance(cfg: SelectionConfig, grid: OccupancyGrid, robot_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _people_cells(cfg: SelectionConfig, frame: Frame, beta: np.ndarray) -> np.ndarray:
+    """int64 (N, 2) world cells (floor(x / cell), floor(y / cell)), each once, of the frame's returns that would be
+    obstacles but for their beta: in the obstacle band and within occupancy.max_range_m, beta above
+    occupancy.beta_max (``SelectionConfig.local_people_steps``)."""
+    occ = cfg.occupancy
+    pts, pix = backproject(frame.depth_m, frame.K, frame.T_world_cam, occ.pixel_stride)
+    near = np.hypot(*(pts[:, :2] - frame.T_world_cam[:2, 3]).T) <= occ.max_range_m
+    keep = near & (pts[:, 2] >= occ.band_lo_m) & (pts[:, 2] <= occ.band_hi_m) & (beta.reshape(-1)[pix] > occ.beta_max)
+    return np.unique(np.floor(pts[keep, :2] / occ.cell_m).astype(np.int64), axis=0).reshape(-1, 2)
+
+
+def _local_clearance(cfg: SelectionConfig, grid: OccupancyGrid, robot_xy: np.ndarray,
+                     people: tuple[tuple[int, np.ndarray], ...] = ()) -> tuple[np.ndarray, np.ndarray]:
     """The known free space around the robot (``SelectionConfig.local_window_m``): float32 (L, L) distance (m)
     from each cell centre to the nearest occupied cell's edge, as :func:`_leg_clear` measures it, and the world
     xy of the window's lower-left corner. Obstacles are looked for up to ``local_window_m`` beyond the window;
-    distances are capped there. Cells outside the grid count as free (unknown, like in the leg check)."""
+    distances are capped there. Cells outside the grid count as free (unknown, like in the leg check).
+    ``people``: (step, world cells) of people returns, whose cells count as occupied here too
+    (``SelectionConfig.local_people_steps``)."""
     cell = grid.cell_m
     half = int(math.ceil(cfg.local_window_m / cell - 1e-9))
     if half == 0 or 0 in grid.shape:
@@ -660,6 +689,10 @@ def _local_clearance(cfg: SelectionConfig, grid: OccupancyGrid, robot_xy: np.nda
     c0, c1 = max(lo[1], 0), min(lo[1] + crop.shape[1], w)
     if r0 < r1 and c0 < c1:
         crop[r0 - lo[0]:r1 - lo[0], c0 - lo[1]:c1 - lo[1]] = occ[r0:r1, c0:c1]
+    for _, xy in people:
+        ij = np.stack([xy[:, 1] - grid.origin_ij[0], xy[:, 0] - grid.origin_ij[1]], axis=1) - lo
+        ij = ij[((ij >= 0) & (ij < crop.shape[0])).all(axis=1)]
+        crop[ij[:, 0], ij[:, 1]] = True
     cap = half * cell
     if crop.any():
         dist = np.minimum(ndimage.distance_transform_edt(~crop) * cell - 0.5 * cell, cap)
@@ -957,15 +990,20 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
         elif reason != "keep":
             mode = "none"
 
+    people = ()
+    if cfg.local_people_steps > 0 and cfg.local_window_m > 0:
+        kept = tuple(p for p in state.people if p[0] > now - cfg.local_people_steps)
+        people = kept + ((now, _people_cells(cfg, f, rec.perception.beta)),)
     new_state = SelectionState(grid, G, arrays, regions, graph_step, target, history, anchor, count, banned, scores,
-                               (float(pose.x_m), float(pose.y_m), float(pose.yaw_rad)), bumps, jams, local_until)
+                               (float(pose.x_m), float(pose.y_m), float(pose.yaw_rad)), bumps, jams, local_until,
+                               people)
     show = scores if scores.graph_step == graph_step else Scores.empty()
     if target is None:
         t_xy, t_yaw, t_node = robot_xy.copy(), float(pose.yaw_rad), -1
     else:
         t_xy, t_yaw, t_node = np.array(target.xy_m, np.float64), float(target.yaw_rad), int(target_node)
     n = len(xy_nodes)
-    local_clear, local_origin = _local_clearance(cfg, marked, robot_xy)
+    local_clear, local_origin = _local_clearance(cfg, marked, robot_xy, people)
     out = SelectionOut(
         target_xy_m=t_xy, target_yaw_rad=t_yaw, target_node=t_node, mode=mode,
         node_xy_m=xy_nodes.copy(),

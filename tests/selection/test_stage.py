@@ -235,7 +235,7 @@ def test_the_robot_does_not_push_into_a_person_standing_in_a_doorway():
 def test_bad_config_values_raise_config_error():
     for kw in ({"variant": "greedy"}, {"l_r": -1.0}, {"rebuild_every": 0}, {"local_threshold": math.inf},
                {"local_share": 1.5}, {"local_share": -0.1}, {"local_share": math.nan},
-               {"reach_yaw_deg": 0.0}, {"bump_give_up": -1}, {"bump_near_m": -0.5}):
+               {"reach_yaw_deg": 0.0}, {"bump_give_up": -1}, {"bump_near_m": -0.5}, {"local_people_steps": -1}):
         with pytest.raises(ConfigError):
             selection.SelectionConfig(**kw)
     with pytest.raises(ConfigError):
@@ -843,6 +843,79 @@ def test_the_local_window_is_the_distance_to_the_grids_obstacles_around_the_robo
     assert selection._local_clearance(cfg, marked, np.array([1.52, 0.61]))[0][12, 12] < 0.2
     off = dataclasses.replace(cfg, local_window_m=0.0)
     assert selection._local_clearance(off, grid, np.array([1.52, 0.61]))[0].shape == (0, 0)
+
+
+def _person_frame(pose: RobotPose2D, person, t: int, room=(9.0, 3.0)) -> StepRecord:
+    """A record whose frame sees ``person`` (a box) with beta 2.1 on it and 0.1 elsewhere."""
+    T = view(pose.x_m, pose.y_m, pose.yaw_rad)
+    depth, which = render_depth(T, K, W, H, room, [person])
+    beta = np.where(which == 0, 2.1, 0.1).astype(np.float32)
+    return StepRecord(frame=Frame(t, t, np.zeros((H, W, 3), np.uint8), depth, K.copy(), T),
+                      perception=PerceptionOut(beta, 0.0, False))
+
+
+def test_people_returns_of_the_last_frames_are_obstacles_in_the_local_window_only():
+    fo, mo = fields_for(np.ones((60, 180), bool), [], [])
+    person = (2.4, 1.2, 2.7, 1.5, 1.8)                        # 0.4 m ahead of the robot, a little to its right
+    here = RobotPose2D(2.0, 1.5, 0.0)
+    away = RobotPose2D(2.0, 1.5, math.pi)                     # turned round: the person is out of view
+
+    def run(steps: int) -> list:
+        cfg = selection.SelectionConfig(local_people_steps=steps)
+        state, outs = state_on(cfg, np.ones((60, 180), bool)), []
+        for t, pose in enumerate([here, away, away, away]):
+            rec = dataclasses.replace(_person_frame(pose, person, t), mapping=mo, fields=fo)
+            state, out = selection.step(cfg, rec, state, derive_rng(0, "sel", t))
+            outs.append((state, out))
+        return outs
+
+    def nearest_m(out: SelectionOut) -> float:                # the window's clearance at the person's near face
+        j = int((2.41 - out.local_origin_xy_m[0]) / out.local_cell_m)
+        i = int((1.35 - out.local_origin_xy_m[1]) / out.local_cell_m)
+        return float(out.local_clear_m[i, j])
+
+    off, one, three = run(0), run(1), run(3)
+    assert nearest_m(off[0][1]) > 0.3                         # the grid never holds the person: nothing there
+    assert nearest_m(one[0][1]) <= 0.0 and nearest_m(three[0][1]) <= 0.0      # seen now: an obstacle there
+    assert nearest_m(one[1][1]) > 0.3                          # one frame: gone as soon as it is out of view
+    assert nearest_m(three[1][1]) <= 0.0 and nearest_m(three[2][1]) <= 0.0    # three frames: kept two steps more
+    assert nearest_m(three[3][1]) > 0.3
+    for (s0, o0), (s3, o3) in zip(off, three):                # and nothing else changes: grid, graph, target
+        assert np.array_equal(s0.grid.logodds, s3.grid.logodds)
+        assert np.array_equal(o0.node_xy_m, o3.node_xy_m) and np.array_equal(o0.target_xy_m, o3.target_xy_m)
+    assert len(three[3][0].people) == 3 and not off[3][0].people
+
+
+def test_with_people_in_the_local_window_the_robot_steers_past_a_person_beside_its_way_without_waiting():
+    sel, fo, mo, cfg, start, yaw = _one_room_way_ahead()
+    fwd, left = np.array([math.cos(yaw), math.sin(yaw)]), np.array([-math.sin(yaw), math.cos(yaw)])
+    c = start + 0.55 * fwd + 0.2 * left                        # stands still, half in the way
+    person = (c[0] - 0.15, c[1] - 0.15, c[0] + 0.15, c[1] + 0.15, 1.8)
+
+    def drive(steps: int) -> tuple[int, int, float]:
+        s_cfg = selection.SelectionConfig(local_people_steps=steps)
+        s_state = state_on(s_cfg, np.ones((60, 190), bool))
+        pose, p_state = RobotPose2D(float(start[0]), float(start[1]), yaw), planning.init_state(cfg)
+        blocked = bumps = 0
+        for t in range(16):
+            rec = dataclasses.replace(_person_frame(pose, person, t), mapping=mo, fields=fo)
+            s_state, window = selection.step(s_cfg, rec, s_state, derive_rng(0, "sel", t))
+            s = dataclasses.replace(sel, local_clear_m=window.local_clear_m, local_origin_xy_m=window.local_origin_xy_m,
+                                    local_cell_m=window.local_cell_m)
+            p_state, out = planning.step(cfg, dataclasses.replace(rec, selection=s), p_state, derive_rng(0, "p", t))
+            blocked += out.blocked
+            nxt = apply_action(pose, Action(out.action), RobotConfig())
+            x0, y0, x1, y1, _ = person
+            if x0 - 0.18 < nxt.x_m < x1 + 0.18 and y0 - 0.18 < nxt.y_m < y1 + 0.18:
+                bumps += 1
+            else:
+                pose = nxt
+        return blocked, bumps, float((np.array([pose.x_m, pose.y_m]) - start) @ fwd)
+
+    blocked, bumps, gone = drive(0)
+    assert blocked >= 2 and gone < 0.5                         # walks up to the person, waits, turns away
+    blocked, bumps, gone = drive(3)
+    assert blocked == 0 and bumps == 0 and gone > 1.5          # turns aside before it gets there, and goes on
 
 
 def test_a_bump_disc_never_covers_the_robot_and_its_node_is_one_it_can_drive_to():
