@@ -149,11 +149,20 @@ def _flat(d: Any, prefix: str = "") -> dict[str, Any]:
     return out
 
 
+# Options added with a default that changed the behaviour before them: the value a config without the key
+# (made by older code) stands for.
+BEFORE_OPTION: dict[str, Any] = {
+    "selection.local_people_steps": 0,
+}
+
+
 def config_difference(a: dict[str, Any], b: dict[str, Any]) -> list[str]:
-    """The keys (dotted) two configs as JSON both have with different values. A key only one has is an option
-    added between the two versions of the code; options come with a default that keeps the behaviour before
-    them, so such a key is no difference."""
+    """The keys (dotted) two configs as JSON have with different values. A key only one has is an option added
+    between the two versions of the code; most options come with a default that keeps the behaviour before them,
+    so such a key is no difference, but one of ``BEFORE_OPTION`` counts as that value where it is missing."""
     fa, fb = _flat(a), _flat(b)
+    for f, g in ((fa, fb), (fb, fa)):
+        f.update({k: v for k, v in BEFORE_OPTION.items() if k not in f and k in g})
     return sorted(k for k in fa.keys() & fb.keys() if fa[k] != fb[k])
 
 

@@ -834,6 +834,10 @@ def test_compare_runs_sets_the_same_runs_side_by_side(tmp_path, capsys):
     # a config that differs leaves the run out; an option only one side has does not
     cfg = mod.config_difference({"m": {"x": 1, "new": 0}}, {"m": {"x": 1}})
     assert cfg == [] and mod.config_difference({"m": {"x": 1}}, {"m": {"x": 2}}) == ["m.x"]
+    # an option whose default changed the behaviour: missing means its value before it existed
+    assert mod.config_difference({"selection": {"l_r": 1}}, {"selection": {"l_r": 1, "local_people_steps": 3}}) == \
+        ["selection.local_people_steps"]
+    assert mod.config_difference({"selection": {"local_people_steps": 0}}, {"selection": {"l_r": 1}}) == []
     # bad input: one line, exit 2
     assert mod.main([str(tmp_path / "a"), str(tmp_path / "nowhere")]) == 2
     assert "no such results folder" in capsys.readouterr().err
