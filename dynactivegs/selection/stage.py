@@ -72,7 +72,7 @@ from dynactivegs.fields.project import FloorMap, motion_floor_map
 from dynactivegs.planning.actions import ActionConfig, forward_blocked, forward_hits
 from dynactivegs.planning.paths import dijkstra, edge_cost
 from dynactivegs.records import FieldsOut, Frame, SelectionOut, StepRecord, robot_pose_of
-from dynactivegs.selection.occupancy import OccupancyConfig, OccupancyGrid, backproject, update_occupancy
+from dynactivegs.selection.occupancy import OccupancyConfig, OccupancyGrid, body_band_returns, update_occupancy
 from dynactivegs.selection.subregions import SubregionConfig, Subregions, cluster_subregions
 from dynactivegs.selection.visibility import (VisibilityConfig, bin_gains, column_occluders, occluder_grid,
                                                view_gains)
@@ -667,11 +667,9 @@ def _people_cells(cfg: SelectionConfig, frame: Frame, beta: np.ndarray) -> np.nd
     """int64 (N, 2) world cells (floor(x / cell), floor(y / cell)), each once, of the frame's returns that would be
     obstacles but for their beta: in the obstacle band and within occupancy.max_range_m, beta above
     occupancy.beta_max (``SelectionConfig.local_people_steps``)."""
-    occ = cfg.occupancy
-    pts, pix = backproject(frame.depth_m, frame.K, frame.T_world_cam, occ.pixel_stride)
-    near = np.hypot(*(pts[:, :2] - frame.T_world_cam[:2, 3]).T) <= occ.max_range_m
-    keep = near & (pts[:, 2] >= occ.band_lo_m) & (pts[:, 2] <= occ.band_hi_m) & (beta.reshape(-1)[pix] > occ.beta_max)
-    return np.unique(np.floor(pts[keep, :2] / occ.cell_m).astype(np.int64), axis=0).reshape(-1, 2)
+    pts, far, band, dynamic = body_band_returns(cfg.occupancy, frame.depth_m, frame.K, frame.T_world_cam, beta)
+    keep = band & dynamic & ~far
+    return np.unique(np.floor(pts[keep, :2] / cfg.occupancy.cell_m).astype(np.int64), axis=0).reshape(-1, 2)
 
 
 def _local_clearance(cfg: SelectionConfig, grid: OccupancyGrid, robot_xy: np.ndarray,
