@@ -22,14 +22,17 @@ began with the robot in a **corridor** room (procedural scenes); the share whose
 (the selection's next new target, within the episode or ``EPISODE_GAP`` steps after it, replaced it as
 unreachable, stuck or timed out; ``reached`` ones are counted too); the steps with a person within
 ``path_stats.NEAR_M`` of the robot (how much crowd the path met) and the person episodes per 100 of them (how
-often meeting someone became a hold-up). Two more columns say whether the people met were in the map the planner
-drives by (the selection's occupancy grid): **people px let in %**, the share of the frames' people pixels whose
-uncertainty beta was at most ``selection.occupancy.beta_max`` (such returns become obstacles in the grid; above it
-they only clear space), and **close people in the grid %**, over the steps and people standing within the
-selection's logged clearance window (``SelectionOut.local_clear_m``, about 0.6 m round the robot) in the open
-(farther than their radius and ``OPEN_M`` from the scene's own obstacles), the share the grid held as an obstacle
-(a known obstacle within their radius of their centre), so that the planner could steer round them before the
-collision check had to stop the robot. A second table pools each preset's runs.
+often meeting someone became a hold-up). Two more columns say whether the people met were in the maps the planner
+drives by: **people px let in %**, the share of the frames' people pixels whose uncertainty beta was at most
+``selection.occupancy.beta_max`` (such returns become obstacles in the selection's occupancy grid; above it they
+only clear space there), and **close people in the clearance map %**, over the steps and people standing within
+the selection's logged clearance window (``SelectionOut.local_clear_m``, about 0.6 m round the robot) in the open
+(farther than their radius and ``OPEN_M`` from the scene's own obstacles), the share that window held as an
+obstacle (a known obstacle within their radius of their centre), so that the planner could steer round them before
+the collision check had to stop the robot. The window holds the grid's obstacles and, with
+``selection.local_people_steps`` above 0, the people returns of the last steps too (beta above beta_max or not),
+so at 0 the column reads the grid alone and above 0 it also counts people held by that window; tables made
+before the option (or at 0) head it "close people in the grid %". A second table pools each preset's runs.
 
 Two presets with the same selection and planner that are held up differently are told apart here: by meeting
 more people (more steps near people at the same rate), by meeting them worse (a higher rate), or by aiming at
@@ -58,7 +61,7 @@ STEP_CAUSES = ("person", "static", "remembered", "evade")
 EPISODE_CAUSES = ("person", "static", "other")
 COLUMNS = ("run", "steps", "blocked: person / static / remembered / evade", "episodes: person / static / other",
            "blocked per episode", "in corridor %", "given up / reached %", "steps near people",
-           "person episodes per 100 near", "people px let in %", "close people in the grid %")
+           "person episodes per 100 near", "people px let in %", "close people in the clearance map %")
 PERSON_SHARE = 0.5
 """A seen block is a person's when at least this share of the returns in the swept box are people pixels."""
 OPEN_M = 0.1
@@ -129,8 +132,8 @@ def step_cause(plan, frame, truth, acfg) -> str | None:
 
 
 def close_people(sel, truth, setting: Setting) -> tuple[int, int]:
-    """(people in the selection's clearance window standing in the open, how many of them the grid held as an
-    obstacle) at one step: the module docstring's grid column."""
+    """(people in the selection's clearance window standing in the open, how many of them the window held as an
+    obstacle) at one step: the module docstring's clearance map column."""
     if sel is None or sel.local_clear_m.size == 0:
         return 0, 0
     size = sel.local_clear_m.shape[0]
