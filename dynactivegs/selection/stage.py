@@ -355,8 +355,8 @@ class SelectionConfig:
     apartment-1000-machine2/full_local_people_3): blocked steps per run 148 -> 86 (fewer in 8 of 8), person
     hold-ups per 100 steps near people 2.0 -> 1.2 (lower in 8 of 8), collisions 27.4 -> 17.6 per run, and the
     mean 2.80 cm / 92.1 % / 24.08 dB -> 2.53 / 92.8 / 24.45; pairs won against baseline (at 0) 3 -> 4 of 8.
-    baseline gains too (seeds 0-1: 3.44 / 90.9 / 24.22 -> 2.88 / 91.8 / 24.33); with both at 3 full beat it in
-    2 of those 8 pairs, 3 with both at 0."""
+    baseline gains too (seeds 0-2: 3.38 / 91.2 / 24.16 -> 2.92 / 92.1 / 24.26); with both at 3 full beats it in
+    3 of 12 pairs, 5 with both at 0 (benchmarks/results/apartment-1000-machine2/full_local_people_3)."""
 
     def __post_init__(self) -> None:
         check_config(self.variant in SELECTION_VARIANTS, "selection.variant", self.variant,
