@@ -30,9 +30,9 @@ the selection's logged clearance window (``SelectionOut.local_clear_m``, about 0
 (farther than their radius and ``OPEN_M`` from the scene's own obstacles), the share that window held as an
 obstacle (a known obstacle within their radius of their centre), so that the planner could steer round them before
 the collision check had to stop the robot. The window holds the grid's obstacles and, with
-``selection.local_people_steps`` above 0, the people returns of the last steps too (beta above beta_max or not),
-so at 0 the column reads the grid alone and above 0 it also counts people held by that window; tables made
-before the option (or at 0) head it "close people in the grid %". A second table pools each preset's runs.
+``selection.local_people_steps`` above 0, the people returns (beta above beta_max) of the last steps too, so at 0
+the column reads the grid alone and above 0 it also counts the people that window holds; tables made before the
+option head it "close people in the grid %". A second table pools each preset's runs.
 
 Two presets with the same selection and planner that are held up differently are told apart here: by meeting
 more people (more steps near people at the same rate), by meeting them worse (a higher rate), or by aiming at
