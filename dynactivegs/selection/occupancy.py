@@ -266,13 +266,14 @@ def backproject(depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, str
 
 def body_band_returns(cfg: OccupancyConfig, depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray,
                       beta: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The frame's world points (every ``pixel_stride``-th pixel, :func:`backproject`), float64 (N, 3), and per
-    point bool (N,): farther than ``max_range_m`` (horizontally), inside the body's height band
-    ``[band_lo_m, band_hi_m]``, and dynamic (beta above ``beta_max``)."""
+    """The frame's world points (every ``pixel_stride``-th pixel, :func:`backproject`), float64 (N, 3), their
+    horizontal distance from the camera, float64 (N,), and per point bool (N,): inside the body's height band
+    ``[band_lo_m, band_hi_m]``, and dynamic (beta above ``beta_max``). A point is beyond range where its distance
+    exceeds ``max_range_m``."""
     pts, pix = backproject(depth_m, K, T_world_cam, cfg.pixel_stride)
-    far = np.hypot(*(pts[:, :2] - T_world_cam[:2, 3]).T) > cfg.max_range_m
+    dist = np.hypot(*(pts[:, :2] - T_world_cam[:2, 3]).T)
     z = pts[:, 2]
-    return pts, far, (z >= cfg.band_lo_m) & (z <= cfg.band_hi_m), beta.reshape(-1)[pix] > cfg.beta_max
+    return pts, dist, (z >= cfg.band_lo_m) & (z <= cfg.band_hi_m), beta.reshape(-1)[pix] > cfg.beta_max
 
 
 def frame_rays(grid: OccupancyGrid, cfg: OccupancyConfig, depth_m: np.ndarray, K: np.ndarray,
@@ -283,10 +284,10 @@ def frame_rays(grid: OccupancyGrid, cfg: OccupancyConfig, depth_m: np.ndarray, K
     is returned grown to contain the camera and all ray ends (log-odds unchanged).
     """
     assert beta.shape == depth_m.shape, f"beta {beta.shape} must match depth {depth_m.shape}"
-    pts, far, band, dynamic = body_band_returns(cfg, depth_m, K, T_world_cam, beta)
+    pts, dist, band, dynamic = body_band_returns(cfg, depth_m, K, T_world_cam, beta)
     cam_xy = T_world_cam[:2, 3].astype(np.float64)
     delta = pts[:, :2] - cam_xy
-    dist = np.hypot(delta[:, 0], delta[:, 1])
+    far = dist > cfg.max_range_m
     scale = np.where(far, cfg.max_range_m / np.maximum(dist, 1e-12), 1.0)
     end_xy = cam_xy + delta * scale[:, None]
     z = pts[:, 2]

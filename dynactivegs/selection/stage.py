@@ -667,8 +667,8 @@ def _people_cells(cfg: SelectionConfig, frame: Frame, beta: np.ndarray) -> np.nd
     """int64 (N, 2) world cells (floor(x / cell), floor(y / cell)), each once, of the frame's returns that would be
     obstacles but for their beta: in the obstacle band and within occupancy.max_range_m, beta above
     occupancy.beta_max (``SelectionConfig.local_people_steps``)."""
-    pts, far, band, dynamic = body_band_returns(cfg.occupancy, frame.depth_m, frame.K, frame.T_world_cam, beta)
-    keep = band & dynamic & ~far
+    pts, dist, band, dynamic = body_band_returns(cfg.occupancy, frame.depth_m, frame.K, frame.T_world_cam, beta)
+    keep = band & dynamic & (dist <= cfg.occupancy.max_range_m)
     return np.unique(np.floor(pts[keep, :2] / cfg.occupancy.cell_m).astype(np.int64), axis=0).reshape(-1, 2)
 
 
