@@ -270,6 +270,7 @@ def body_band_returns(cfg: OccupancyConfig, depth_m: np.ndarray, K: np.ndarray, 
     horizontal distance from the camera, float64 (N,), and per point bool (N,): inside the body's height band
     ``[band_lo_m, band_hi_m]``, and dynamic (beta above ``beta_max``). A point is beyond range where its distance
     exceeds ``max_range_m``."""
+    assert beta.shape == depth_m.shape, f"beta {beta.shape} must match depth {depth_m.shape}"
     pts, pix = backproject(depth_m, K, T_world_cam, cfg.pixel_stride)
     dist = np.hypot(*(pts[:, :2] - T_world_cam[:2, 3]).T)
     z = pts[:, 2]
@@ -277,14 +278,17 @@ def body_band_returns(cfg: OccupancyConfig, depth_m: np.ndarray, K: np.ndarray, 
 
 
 def frame_rays(grid: OccupancyGrid, cfg: OccupancyConfig, depth_m: np.ndarray, K: np.ndarray,
-               T_world_cam: np.ndarray, beta: np.ndarray) -> tuple[OccupancyGrid, FrameRays]:
+               T_world_cam: np.ndarray, beta: np.ndarray,
+               returns: tuple[np.ndarray, ...] | None = None) -> tuple[OccupancyGrid, FrameRays]:
     """Classify the frame's returns and express the rays in the (grown if needed) grid's coordinates.
 
     ``beta`` float32 (H, W): per-pixel uncertainty, high on probably-moving things. The grid
-    is returned grown to contain the camera and all ray ends (log-odds unchanged).
+    is returned grown to contain the camera and all ray ends (log-odds unchanged). ``returns``: the
+    frame's :func:`body_band_returns`, when the caller has them already (computed here otherwise).
     """
-    assert beta.shape == depth_m.shape, f"beta {beta.shape} must match depth {depth_m.shape}"
-    pts, dist, band, dynamic = body_band_returns(cfg, depth_m, K, T_world_cam, beta)
+    if returns is None:
+        returns = body_band_returns(cfg, depth_m, K, T_world_cam, beta)
+    pts, dist, band, dynamic = returns
     cam_xy = T_world_cam[:2, 3].astype(np.float64)
     delta = pts[:, :2] - cam_xy
     far = dist > cfg.max_range_m
@@ -391,15 +395,17 @@ def apply_seen(logodds: np.ndarray, seen_free: np.ndarray, seen_occ: np.ndarray,
 
 
 def update_occupancy(grid: OccupancyGrid, cfg: OccupancyConfig, depth_m: np.ndarray, K: np.ndarray,
-                     T_world_cam: np.ndarray, beta: np.ndarray) -> OccupancyGrid:
+                     T_world_cam: np.ndarray, beta: np.ndarray,
+                     returns: tuple[np.ndarray, ...] | None = None) -> OccupancyGrid:
     """The grid after integrating one RGB-D frame (see the module docstring for the rule).
 
     ``depth_m`` float32 (H, W) z-depth in metres (0 = no return); ``K`` float64 (3, 3);
     ``T_world_cam`` float64 (4, 4) camera -> world; ``beta`` float32 (H, W) uncertainty.
-    The grid grows when the frame reaches beyond it. Pure: ``grid`` is not modified.
+    The grid grows when the frame reaches beyond it. Pure: ``grid`` is not modified. ``returns``: the frame's
+    :func:`body_band_returns` when the caller has them already.
     """
     assert abs(grid.cell_m - cfg.cell_m) < 1e-12, "grid and config cell sizes differ"
-    grid, rays = frame_rays(grid, cfg, depth_m, K, T_world_cam, beta)
+    grid, rays = frame_rays(grid, cfg, depth_m, K, T_world_cam, beta, returns)
     top = obstacle_tops(grid.top_m, rays)
     seen_free, seen_occ = seen_masks(grid.shape, rays, top, cfg.clear_below_m)
     return OccupancyGrid(grid.origin_ij, grid.cell_m, apply_seen(grid.logodds, seen_free, seen_occ, cfg), top)

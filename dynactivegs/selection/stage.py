@@ -663,11 +663,12 @@ def _leg_clear(cfg: SelectionConfig, grid: OccupancyGrid, robot_xy: np.ndarray, 
     return ~low
 
 
-def _people_cells(cfg: SelectionConfig, frame: Frame, beta: np.ndarray) -> np.ndarray:
-    """int64 (N, 2) world cells (floor(x / cell), floor(y / cell)), each once, of the frame's returns that would be
-    obstacles but for their beta: in the obstacle band and within occupancy.max_range_m, beta above
-    occupancy.beta_max (``SelectionConfig.local_people_steps``)."""
-    pts, dist, band, dynamic = body_band_returns(cfg.occupancy, frame.depth_m, frame.K, frame.T_world_cam, beta)
+def _people_cells(cfg: SelectionConfig, returns: tuple[np.ndarray, ...]) -> np.ndarray:
+    """int64 (N, 2) world cells (floor(x / cell), floor(y / cell)), each once, of the frame's returns
+    (:func:`~dynactivegs.selection.occupancy.body_band_returns`) that would be obstacles but for their beta: in the
+    obstacle band and within occupancy.max_range_m, beta above occupancy.beta_max
+    (``SelectionConfig.local_people_steps``)."""
+    pts, dist, band, dynamic = returns
     keep = band & dynamic & (dist <= cfg.occupancy.max_range_m)
     return np.unique(np.floor(pts[keep, :2] / cfg.occupancy.cell_m).astype(np.int64), axis=0).reshape(-1, 2)
 
@@ -888,7 +889,8 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
     now = int(f.step)
     pose = robot_pose_of(f)
     robot_xy = np.array([pose.x_m, pose.y_m])
-    grid = update_occupancy(state.grid, cfg.occupancy, f.depth_m, f.K, f.T_world_cam, rec.perception.beta)
+    returns = body_band_returns(cfg.occupancy, f.depth_m, f.K, f.T_world_cam, rec.perception.beta)
+    grid = update_occupancy(state.grid, cfg.occupancy, f.depth_m, f.K, f.T_world_cam, rec.perception.beta, returns)
     lp = state.last_pose
     # A robot that kept its pose with an unreached target was blocked: by something it cannot see
     # (low and near), by something static it sees, or it waited for something moving it sees
@@ -998,7 +1000,7 @@ def step(cfg: SelectionConfig, rec: StepRecord, state: SelectionState | None,
     people = ()
     if cfg.local_people_steps > 0 and cfg.local_window_m > 0:
         kept = tuple(p for p in state.people if p[0] > now - cfg.local_people_steps)
-        people = kept + ((now, _people_cells(cfg, f, rec.perception.beta)),)
+        people = kept + ((now, _people_cells(cfg, returns)),)
     new_state = SelectionState(grid, G, arrays, regions, graph_step, target, history, anchor, count, banned, scores,
                                (float(pose.x_m), float(pose.y_m), float(pose.yaw_rad)), bumps, jams, local_until,
                                people)
