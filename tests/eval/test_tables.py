@@ -127,21 +127,24 @@ def test_pairs_table_counts_wins_run_against_run():
     runs.append(fake_run("weighted", "a", 0, acc=4.0, cr=81.0, psnr=19.0))   # ties Acc: no win
     t = pairs_table(runs)
     assert t.header == ("Scene", "Seed", "weighted", "full")
-    by_pair = {(r[0], r[1]): r[2:] for r in t.rows[:-4]}
+    by_pair = {(r[0], r[1]): r[2:] for r in t.rows[:-5]}
     assert by_pair[("a", "0")] == ("C.R.", "all") and by_pair[("b", "0")] == ("", "C.R., PSNR")
     assert by_pair[("a", "2")] == ("", "all")
     assert [r[0] for r in t.rows[:6]] == ["a", "b", "a", "b", "a", "b"]                # ordered by seed, then scene
-    won = t.rows[-4]
+    won = t.rows[-5]
     assert won[:2] == ("pairs won", "all Acc / C.R. / PSNR") and won[2:] == ("0 / 0 / 1 / 0 of 1", "3 / 3 / 6 / 6 of 6")
     # exact binomial 95 % intervals: 0 of 1 is 0-97.5 %, 3 of 6 is 11.8-88.2 %
-    assert t.rows[-3] == ("won on all", "share (95 % CI)", "0 % (0-98 %)", "50 % (12-88 %)")
+    assert t.rows[-4] == ("won on all", "share (95 % CI)", "0 % (0-98 %)", "50 % (12-88 %)")
     # wins : losses per metric; weighted ties Acc (no decided pair), full loses Acc on b, and 6 : 0 is 2 / 2^6
-    assert t.rows[-2] == ("sign test", "Acc / C.R. / PSNR", "0:0 p n/a / 1:0 p 1 / 0:1 p 1",
+    assert t.rows[-3] == ("sign test", "Acc / C.R. / PSNR", "0:0 p n/a / 1:0 p 1 / 0:1 p 1",
                           "3:3 p 1 / 6:0 p 0.031 / 6:0 p 0.031")
-    diff = t.rows[-1]
+    diff = t.rows[-2]
     # full - baseline over the 6 pairs: Acc -2 on a, +2 on b; C.R. 10 / 12 / 14 on both; PSNR 5 on a, 2 on b
     assert diff[2:] == ("+0.00 / +1.0 / -1.00", "+0.00 ± 2.19 / +12.0 ± 1.8 / +3.50 ± 1.64")
-    assert [b[3] for b in t.best[:-4]] == [True, False] * 3 and not any(any(b) for b in t.best[-4:])
+    # effect in SD, + = better: Acc 0 / 2.19, C.R. 12 / 1.79, PSNR 3.5 / 1.64; all three 0.5 x 1.0 x Phi(2.13)
+    assert t.rows[-1] == ("effect in SD", "Acc / C.R. / PSNR (all, normal model)", "n/a / n/a / n/a",
+                          "+0.00 / +6.71 / +2.13 (49 %)")
+    assert [b[3] for b in t.best[:-5]] == [True, False] * 3 and not any(any(b) for b in t.best[-5:])
     md = to_markdown(t)
     assert "| a | 0 | C.R. | **all** |" in md
     recs = list(csv.DictReader(io.StringIO(to_csv(t))))
@@ -167,8 +170,23 @@ def test_pairs_table_needs_the_reference_and_a_rival(tmp_path):
     for c in r["checkpoints"]:
         c["psnr_db"] = None
     t = pairs_table([fake_run("baseline", "a", 0, acc=1, cr=50.0, psnr=20), r])
-    assert t.rows[0][2] == "Acc, C.R." and t.rows[-4][2] == "0 / 1 / 1 / 0 of 1"
-    assert t.rows[-2][2] == "1:0 p 1 / 1:0 p 1 / 0:0 p n/a"
+    assert t.rows[0][2] == "Acc, C.R." and t.rows[-5][2] == "0 / 1 / 1 / 0 of 1"
+    assert t.rows[-3][2] == "1:0 p 1 / 1:0 p 1 / 0:0 p n/a"
+    assert t.rows[-1][2] == "n/a / n/a / n/a"                      # one pair: no spread, no effect
+
+
+def test_standardised_effects_and_the_normal_share_on_known_values():
+    specs = [tables.METRIC_BY_KEY[k] for k in ("acc_cm", "cr_pct", "psnr_db")]
+    # Acc lower is better: a mean difference of -1 cm with std 1 is +1 SD for the method
+    d = np.array([[-2.0, 1.0, 0.0], [0.0, 3.0, 1.0], [-1.0, 5.0, -1.0]])
+    z = tables.standardised_effects(d, specs)
+    np.testing.assert_allclose(z, [1.0, 1.5, 0.0])
+    # Phi(1) x Phi(1.5) x Phi(0) = 0.8413 x 0.9332 x 0.5
+    assert abs(tables.normal_share_on_all(z) - 100 * 0.841345 * 0.933193 * 0.5) < 1e-3
+    # 93 % per metric on three independent metrics is about 80 % on all
+    assert abs(tables.normal_share_on_all([1.46] * 3) - 80.0) < 0.5
+    assert tables.standardised_effects(d[:1], specs) == [None, None, None]
+    assert tables.normal_share_on_all([1.0, None]) is None
 
 
 def test_win_share_interval_and_sign_test_on_known_values():
