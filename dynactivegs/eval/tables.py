@@ -402,9 +402,12 @@ def standardised_effects(diffs: np.ndarray, specs: Sequence[MetricSpec]) -> list
     pairs (z 1.0: 84 %, 1.5: 93 %)."""
     out: list[float | None] = []
     for i, spec in enumerate(specs):
-        d = diffs[:, i] if diffs.ndim == 2 and len(diffs) else np.zeros(0)
-        sd = float(np.std(d, ddof=1)) if len(d) >= 2 else 0.0
-        out.append(None if sd <= 0.0 else (1.0 if spec.higher_is_better else -1.0) * float(np.mean(d)) / sd + 0.0)
+        c = mean_std(diffs[:, i])
+        if c.n < 2 or c.std <= 0.0:
+            out.append(None)
+            continue
+        z = c.mean / c.std if spec.higher_is_better else -c.mean / c.std
+        out.append(z + 0.0)                         # + 0.0: a zero mean reads +0.00, not -0.00
     return out
 
 
