@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from dynactivegs.selection.occupancy import (FrameRays, OccupancyConfig, OccupancyGrid, apply_seen, frame_rays,
+from dynactivegs.selection.occupancy import (FrameRays, OccupancyConfig, OccupancyGrid, apply_seen, frame_rays, let_go,
                                              obstacle_tops)
 
 
@@ -67,7 +67,7 @@ def update_occupancy_reference(grid: OccupancyGrid, cfg: OccupancyConfig, depth_
     grid, rays = frame_rays(grid, cfg, depth_m, K, T_world_cam, beta)
     top = obstacle_tops(grid.top_m, rays)
     seen_free, seen_occ = seen_masks_reference(grid.shape, rays, top, cfg.clear_below_m)
-    return OccupancyGrid(grid.origin_ij, grid.cell_m, apply_seen(grid.logodds, seen_free, seen_occ, cfg), top)
+    return let_go(grid, cfg, apply_seen(grid.logodds, seen_free, seen_occ, cfg), top, seen_occ)
 
 
 def dyn_distance_terms_reference(G, um_attr: str = "um_mean") -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -44,6 +44,7 @@ from enum import IntEnum
 
 import numba
 import numpy as np
+from scipy import ndimage
 
 from dynactivegs.errors import check_config
 
@@ -99,6 +100,25 @@ class OccupancyConfig:
     """Use every n-th pixel in both image directions (1 = all pixels)."""
     grow_chunk_m: float = 2.0
     """When a frame reaches beyond the grid, the grid grows to the enclosing multiple of this many metres."""
+    transient_frames: int = 0
+    """A cell held occupied by someone who stood still is let go (made free again) after this many frames with no
+    static obstacle return in it, when it is *transient*: it had been held at ``logodds_min`` (seen free in
+    several frames) before, and its returns reached ``transient_top_m`` (a standing person's height, not a table's
+    or a chair's). A person who stood still has a low beta, so their returns become obstacles (``beta_max``), and
+    only frames that see through the spot clear them again (``logodds_max``); a robot that walked away from the
+    spot never sees it again and the cells cut the graph for good. On ``motion_view``, apartment-00, seed 1 (1000
+    steps, benchmarks/results/apartment-1000-machine2/full_local_people_3), two people stood 35 steps inside the
+    bedroom door at steps 265-300, the robot left for the far end of the flat, and the 0.09 m2 of floor they left
+    occupied cut the bedroom, the kitchen and the bathroom off the graph until step 590 (the robot came back past
+    the spot): 300 steps in a room already seen, and a bathroom never seen. Let go, a cell is free again with
+    log-odds ``free_below + l_free``, so one occupied return makes it occupied again (the person is still
+    there). 0: never let go (cells clear only by frames that see through them)."""
+    transient_clear_m: float = 0.15
+    """A cell is transient only where every cell within this distance was seen free before any obstacle (open
+    floor around a person, not the inside of a shelf)."""
+    transient_top_m: float = 1.2
+    """A cell is transient (``transient_frames``) only where its highest static obstacle return (``top_m``)
+    reached this height: a standing person; tables, seats and counters are lower."""
 
     def __post_init__(self) -> None:
         check_config(0.005 <= self.cell_m <= 1.0, "occupancy.cell_m", self.cell_m, "in [0.005, 1] m")
@@ -118,6 +138,10 @@ class OccupancyConfig:
                  "above occupancy.occupied_above")
         check_config(1 <= self.pixel_stride <= 64, "occupancy.pixel_stride", self.pixel_stride, "in [1, 64]")
         check_config(self.grow_chunk_m >= self.cell_m, "occupancy.grow_chunk_m", self.grow_chunk_m, ">= occupancy.cell_m")
+        check_config(self.transient_frames >= 0, "occupancy.transient_frames", self.transient_frames,
+                     ">= 0 (0: never let a cell go)")
+        check_config(self.band_lo_m < self.transient_top_m <= self.band_hi_m, "occupancy.transient_top_m",
+                     self.transient_top_m, "in (occupancy.band_lo_m, occupancy.band_hi_m]")
 
 
 @dataclass(frozen=True, slots=True)
@@ -128,14 +152,18 @@ class OccupancyGrid:
     cell_m: float
     logodds: np.ndarray           # float32 (H, W); 0 = never seen
     top_m: np.ndarray | None = None   # float32 (H, W): highest static obstacle return seen in the cell (0: none)
+    freed: np.ndarray | None = None   # bool (H, W): the cell was held at logodds_min before any obstacle was seen in it
+    quiet: np.ndarray | None = None   # int32 (H, W): frames since the cell last had a static obstacle return
 
     def __post_init__(self) -> None:
         assert self.logodds.ndim == 2 and self.logodds.dtype == np.float32
-        if self.top_m is None:
-            object.__setattr__(self, "top_m", np.zeros(self.logodds.shape, np.float32))
-        assert self.top_m.shape == self.logodds.shape and self.top_m.dtype == np.float32
+        for name, dtype in (("top_m", np.float32), ("freed", np.bool_), ("quiet", np.int32)):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, np.zeros(self.logodds.shape, dtype))
+            a = getattr(self, name)
+            assert a.shape == self.logodds.shape and a.dtype == dtype, f"{name} {a.shape} {a.dtype}"
+            a.flags.writeable = False
         self.logodds.flags.writeable = False
-        self.top_m.flags.writeable = False
 
     # ------------------------------------------------------------------ construction
     @staticmethod
@@ -220,12 +248,14 @@ class OccupancyGrid:
         if h and w:
             n_i0, n_j0 = min(n_i0, i0), min(n_j0, j0)
             n_i1, n_j1 = max(n_i1, i0 + h), max(n_j1, j0 + w)
-        out = np.zeros((n_i1 - n_i0, n_j1 - n_j0), np.float32)
-        top = np.zeros_like(out)
-        if h and w:
-            out[i0 - n_i0:i0 - n_i0 + h, j0 - n_j0:j0 - n_j0 + w] = self.logodds
-            top[i0 - n_i0:i0 - n_i0 + h, j0 - n_j0:j0 - n_j0 + w] = self.top_m
-        return OccupancyGrid((n_i0, n_j0), self.cell_m, out, top)
+        old = (slice(i0 - n_i0, i0 - n_i0 + h), slice(j0 - n_j0, j0 - n_j0 + w))
+        arrays = []
+        for a in (self.logodds, self.top_m, self.freed, self.quiet):
+            b = np.zeros((n_i1 - n_i0, n_j1 - n_j0), a.dtype)
+            if h and w:
+                b[old] = a
+            arrays.append(b)
+        return OccupancyGrid((n_i0, n_j0), self.cell_m, *arrays)
 
 
 @dataclass(frozen=True, slots=True)
@@ -408,4 +438,23 @@ def update_occupancy(grid: OccupancyGrid, cfg: OccupancyConfig, depth_m: np.ndar
     grid, rays = frame_rays(grid, cfg, depth_m, K, T_world_cam, beta, returns)
     top = obstacle_tops(grid.top_m, rays)
     seen_free, seen_occ = seen_masks(grid.shape, rays, top, cfg.clear_below_m)
-    return OccupancyGrid(grid.origin_ij, grid.cell_m, apply_seen(grid.logodds, seen_free, seen_occ, cfg), top)
+    return let_go(grid, cfg, apply_seen(grid.logodds, seen_free, seen_occ, cfg), top, seen_occ)
+
+
+def let_go(grid: OccupancyGrid, cfg: OccupancyConfig, logodds: np.ndarray, top: np.ndarray,
+           seen_occ: np.ndarray) -> OccupancyGrid:
+    """The grid of one frame's update (``logodds`` and ``top`` after it, ``seen_occ`` its occupied cells), with
+    the transient cells that had no static obstacle return for ``transient_frames`` frames made free again
+    (:attr:`OccupancyConfig.transient_frames`; nothing changes at 0)."""
+    freed = grid.freed | ((logodds <= np.float32(cfg.logodds_min)) & (top <= 0.0))
+    quiet = np.where(seen_occ, 0, np.minimum(grid.quiet, np.iinfo(np.int32).max - 1) + 1).astype(np.int32)
+    if cfg.transient_frames > 0:
+        r = int(round(cfg.transient_clear_m / grid.cell_m))
+        yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
+        open_floor = ndimage.binary_erosion(freed, structure=(yy ** 2 + xx ** 2 <= r * r), border_value=0)
+        stale = (open_floor & (quiet >= cfg.transient_frames) & (top >= np.float32(cfg.transient_top_m))
+                 & (logodds > np.float32(cfg.free_below)))
+        if stale.any():
+            logodds = np.where(stale, np.float32(cfg.free_below + cfg.l_free), logodds).astype(np.float32)
+            top = np.where(stale, np.float32(0.0), top).astype(np.float32)
+    return OccupancyGrid(grid.origin_ij, grid.cell_m, logodds, top, freed, quiet)

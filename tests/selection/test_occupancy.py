@@ -126,6 +126,65 @@ def test_a_person_who_stood_long_is_cleared_in_a_few_frames_of_seeing_through():
         assert g.states(cfg)[ij] == after_6
 
 
+def _stood_then_left_behind(cfg: OccupancyConfig, obstacle, away_frames: int, seen_meanwhile: bool = False):
+    """Grid after: 6 frames of the empty room (its floor seen free), 10 with ``obstacle`` standing in it (calm:
+    beta 0), then ``away_frames`` facing the other way (or, ``seen_meanwhile``, still facing it)."""
+    empty, K, T, _ = _room_frame()
+    present, _, _, _ = _room_frame(boxes=[obstacle])
+    away, _, T_away, _ = _room_frame(yaw=math.pi)
+    beta = np.zeros_like(empty)
+    g = OccupancyGrid.empty(cfg.cell_m)
+    for depth, T_now, n in ((empty, T, 6), (present, T, 10), (present if seen_meanwhile else away,
+                                                               T if seen_meanwhile else T_away, away_frames)):
+        for _ in range(n):
+            g = update_occupancy(g, cfg, depth, K, T_now, beta)
+    return g
+
+
+def test_a_person_who_stood_where_the_floor_was_seen_free_is_let_go_after_transient_frames():
+    """A calm person left occupied cells on floor seen free before; with the robot looking away nothing clears
+    them. transient_frames lets them go (free again) that many frames after their last return; 0 keeps them."""
+    person = (2.43, 1.33, 2.83, 1.73, 1.8)
+    on = dataclasses.replace(CFG, transient_frames=20)
+    ij = None
+    for cfg, frames, want in ((CFG, 40, CellState.OCCUPIED), (on, 15, CellState.OCCUPIED), (on, 25, CellState.FREE)):
+        g = _stood_then_left_behind(cfg, person, frames)
+        ij = tuple(g.world_to_cell(np.array([2.45, 1.5])))
+        assert g.freed[ij] and g.quiet[ij] == frames
+        assert g.states(cfg)[ij] == want, (cfg.transient_frames, frames)
+    assert g.top_m[ij] == 0.0                                       # let go: no obstacle seen there any more
+    # let go, one return makes it occupied again: the person is still there
+    present, K, T, _ = _room_frame(boxes=[person])
+    g = update_occupancy(g, on, present, K, T, np.zeros_like(present))
+    assert g.states(on)[ij] == CellState.OCCUPIED
+
+
+def test_what_is_not_a_standing_person_on_seen_floor_is_never_let_go():
+    on = dataclasses.replace(CFG, transient_frames=20)
+    # still in view: each frame returns from it, so it never goes quiet
+    g = _stood_then_left_behind(on, (2.43, 1.33, 2.83, 1.73, 1.8), 40, seen_meanwhile=True)
+    assert g.states(on)[tuple(g.world_to_cell(np.array([2.45, 1.5])))] == CellState.OCCUPIED
+    # a seat on seen floor: lower than transient_top_m
+    g = _stood_then_left_behind(on, (2.43, 1.33, 2.83, 1.73, 0.6), 40)
+    assert g.states(on)[tuple(g.world_to_cell(np.array([2.45, 1.5])))] == CellState.OCCUPIED
+    # the far wall was never seen free, however long the robot looks away
+    g = _stood_then_left_behind(on, (2.43, 1.33, 2.83, 1.73, 1.8), 60)
+    j = g.world_to_cell(np.array([3.95, 0.0]))[1]
+    wall = g.occupied(on)[:, j] | g.occupied(on)[:, j + 1]
+    before = _stood_then_left_behind(CFG, (2.43, 1.33, 2.83, 1.73, 1.8), 60)
+    assert (wall == (before.occupied(CFG)[:, j] | before.occupied(CFG)[:, j + 1])).all() and wall.sum() >= 15
+    # a tall thing standing there from the start: its floor was never seen free before it
+    cupboard = (2.43, 1.33, 2.83, 1.73, 1.8)
+    present, K, T, _ = _room_frame(boxes=[cupboard])
+    away, _, T_away, _ = _room_frame(yaw=math.pi)
+    g = OccupancyGrid.empty(on.cell_m)
+    for depth, T_now, n in ((present, T, 16), (away, T_away, 40)):
+        for _ in range(n):
+            g = update_occupancy(g, on, depth, K, T_now, np.zeros_like(depth))
+    ij = tuple(g.world_to_cell(np.array([2.45, 1.5])))
+    assert g.states(on)[ij] == CellState.OCCUPIED and not g.freed[ij] and g.quiet[ij] == 40
+
+
 def test_rays_passing_high_over_a_low_obstacle_leave_it_occupied():
     seat = (2.03, 1.33, 2.43, 1.73, 0.5)
     depth, K, T, _ = _room_frame(boxes=[seat], x=0.3)             # seen from 1.7 m
@@ -179,3 +238,7 @@ def test_bad_config_values_raise_config_error():
         dataclasses.replace(CFG, l_free=0.3)
     with pytest.raises(ConfigError):
         OccupancyConfig(pixel_stride=0)
+    with pytest.raises(ConfigError, match="transient_frames"):
+        OccupancyConfig(transient_frames=-1)
+    with pytest.raises(ConfigError, match="transient_top_m"):
+        OccupancyConfig(transient_top_m=1.6)
