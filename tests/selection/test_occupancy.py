@@ -211,7 +211,9 @@ def test_grid_grows_without_moving_what_it_knows():
     beta = np.zeros_like(depth)
     g = OccupancyGrid.allocate((0.5, 1.0), (1.5, 2.0), CFG.cell_m)
     assert g.shape == (10, 10)
-    g = update_occupancy(g, CFG, depth, K, T, beta)
+    for _ in range(6):                                          # 6 frames: the floor is held at logodds_min (freed)
+        g = update_occupancy(g, CFG, depth, K, T, beta)
+    assert g.freed.any() and g.quiet.max() == 6
     assert g.shape[1] * CFG.cell_m >= 3.5
     wall_ij = g.world_to_cell(np.array([4.05, 1.5]))
     before = g.logodds[tuple(wall_ij)]
@@ -220,6 +222,8 @@ def test_grid_grows_without_moving_what_it_knows():
     assert g2.origin_xy_m[0] == pytest.approx(-2.0) and g2.origin_ij[1] == -20     # snapped to 2 m chunks
     assert g2.shape[1] == g.shape[1] + 20
     assert g2.logodds[tuple(g2.world_to_cell(np.array([4.05, 1.5])))] == before
+    for a, b in ((g.freed, g2.freed), (g.quiet, g2.quiet), (g.top_m, g2.top_m)):   # the per-cell history moves too
+        assert b.sum() == a.sum() and b[tuple(g2.world_to_cell(np.array([4.05, 1.5])))] == a[tuple(wall_ij)]
     np.testing.assert_allclose(g2.cell_to_world(g2.world_to_cell(np.array([1.23, 2.34]))), [1.25, 2.35])
 
 
