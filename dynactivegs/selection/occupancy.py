@@ -457,11 +457,12 @@ def let_go(grid: OccupancyGrid, cfg: OccupancyConfig, logodds: np.ndarray, top: 
     freed = grid.freed | ((logodds <= np.float32(cfg.logodds_min)) & (top <= 0.0))
     quiet = np.where(seen_occ, 0, np.minimum(grid.quiet, np.iinfo(np.int32).max - 1) + 1).astype(np.int32)
     if cfg.transient_frames > 0:
-        r = int(round(cfg.transient_clear_m / grid.cell_m))
-        yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
-        open_floor = ndimage.binary_erosion(freed, structure=(yy ** 2 + xx ** 2 <= r * r), border_value=0)
-        stale = (open_floor & (quiet >= cfg.transient_frames) & (top >= np.float32(cfg.transient_top_m))
+        stale = (freed & (quiet >= cfg.transient_frames) & (top >= np.float32(cfg.transient_top_m))
                  & (logodds > np.float32(cfg.free_below)))
+        if stale.any():                            # the floor-all-round test only where a cell could go
+            r = int(round(cfg.transient_clear_m / grid.cell_m))
+            yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
+            stale &= ndimage.binary_erosion(freed, structure=(yy ** 2 + xx ** 2 <= r * r), border_value=0)
         if stale.any():
             logodds = np.where(stale, np.float32(cfg.free_below + cfg.l_free), logodds).astype(np.float32)
             top = np.where(stale, np.float32(0.0), top).astype(np.float32)

@@ -126,15 +126,16 @@ def test_a_person_who_stood_long_is_cleared_in_a_few_frames_of_seeing_through():
         assert g.states(cfg)[ij] == after_6
 
 
-def _stood_then_left_behind(cfg: OccupancyConfig, obstacle, away_frames: int, seen_meanwhile: bool = False):
-    """Grid after: 6 frames of the empty room (its floor seen free), 10 with ``obstacle`` standing in it (calm:
-    beta 0), then ``away_frames`` facing the other way (or, ``seen_meanwhile``, still facing it)."""
+def _stood_then_left_behind(cfg: OccupancyConfig, obstacle, away_frames: int, seen_meanwhile: bool = False,
+                            empty_frames: int = 6):
+    """Grid after: ``empty_frames`` frames of the empty room (its floor seen free), 10 with ``obstacle`` standing in
+    it (calm: beta 0), then ``away_frames`` facing the other way (or, ``seen_meanwhile``, still facing it)."""
     empty, K, T, _ = _room_frame()
     present, _, _, _ = _room_frame(boxes=[obstacle])
     away, _, T_away, _ = _room_frame(yaw=math.pi)
     beta = np.zeros_like(empty)
     g = OccupancyGrid.empty(cfg.cell_m)
-    for depth, T_now, n in ((empty, T, 6), (present, T, 10), (present if seen_meanwhile else away,
+    for depth, T_now, n in ((empty, T, empty_frames), (present, T, 10), (present if seen_meanwhile else away,
                                                                T if seen_meanwhile else T_away, away_frames)):
         for _ in range(n):
             g = update_occupancy(g, cfg, depth, K, T_now, beta)
@@ -146,7 +147,6 @@ def test_a_person_who_stood_where_the_floor_was_seen_free_is_let_go_after_transi
     them. transient_frames lets them go (free again) that many frames after their last return; 0 keeps them."""
     person = (2.43, 1.33, 2.83, 1.73, 1.8)
     on = dataclasses.replace(CFG, transient_frames=20)
-    ij = None
     for cfg, frames, want in ((CFG, 40, CellState.OCCUPIED), (on, 15, CellState.OCCUPIED), (on, 25, CellState.FREE)):
         g = _stood_then_left_behind(cfg, person, frames)
         ij = tuple(g.world_to_cell(np.array([2.45, 1.5])))
@@ -174,13 +174,7 @@ def test_what_is_not_a_standing_person_on_seen_floor_is_never_let_go():
     before = _stood_then_left_behind(CFG, (2.43, 1.33, 2.83, 1.73, 1.8), 60)
     assert (wall == (before.occupied(CFG)[:, j] | before.occupied(CFG)[:, j + 1])).all() and wall.sum() >= 15
     # a tall thing standing there from the start: its floor was never seen free before it
-    cupboard = (2.43, 1.33, 2.83, 1.73, 1.8)
-    present, K, T, _ = _room_frame(boxes=[cupboard])
-    away, _, T_away, _ = _room_frame(yaw=math.pi)
-    g = OccupancyGrid.empty(on.cell_m)
-    for depth, T_now, n in ((present, T, 16), (away, T_away, 40)):
-        for _ in range(n):
-            g = update_occupancy(g, on, depth, K, T_now, np.zeros_like(depth))
+    g = _stood_then_left_behind(on, (2.43, 1.33, 2.83, 1.73, 1.8), 40, empty_frames=0)
     ij = tuple(g.world_to_cell(np.array([2.45, 1.5])))
     assert g.states(on)[ij] == CellState.OCCUPIED and not g.freed[ij] and g.quiet[ij] == 40
 
