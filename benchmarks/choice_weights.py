@@ -15,6 +15,13 @@ choices together (runs with different logged weights pool by setting).
 It is open loop, one step at a time: the robot would have gone elsewhere after a changed choice, so this says how
 much each term moves the choices the run made, not what a run with other weights would do (that needs the run).
 The first setting of each run is the run's own weights, which must give back every logged choice.
+
+A second table asks of ``full``'s choices in its own subregion before step ``--first-steps`` (the first quarter of
+a 1000-step run by default) how far the subregion rule held the robot back by gain: the best I_s of the robot's
+subregion over the best I_s anywhere in reach (quartiles; how many are under a half and under 0.3, what a rule
+leaving the subregion below that share of the best gain would change), and how many of those choices the best
+eq. (7) score anywhere (gain + cost with ``full``'s terms, no subregion) would have made otherwise, with the mean I_s
+and graph distance of both.
 """
 
 from __future__ import annotations
@@ -45,6 +52,9 @@ class Choice:
     cost: np.ndarray          # (C,) C as logged
     plain: np.ndarray         # (C,) C with the plain path length
     dist_m: np.ndarray        # (C,) graph distance from the robot's start node
+    mode: str = ""            # how the run chose it: local, global, ...
+    finite: np.ndarray | None = None   # bool (C,): every candidate in reach (finite score)
+    score: np.ndarray | None = None    # (C,) the logged eq. (7) score
 
 
 def logged_choice(sel, pool: np.ndarray) -> int | None:
@@ -84,7 +94,8 @@ def read_choices(mcap: Path) -> tuple[str, object, list[Choice]]:
         turn = _turning_rad(s.node_xy_m[s.cand_node[::ny]], s.cand_yaw_rad[:ny], robot_xy, pose.yaw_rad,
                             sel_cfg.reach_tol_m).ravel()
         out.append(Choice(st.step, pool, chosen, s.cand_gain, s.cand_risk, s.cand_cost,
-                          dist[s.cand_node] + sel_cfg.turn_cost_m * turn, dist[s.cand_node]))
+                          dist[s.cand_node] + sel_cfg.turn_cost_m * turn, dist[s.cand_node], s.mode, finite,
+                          s.cand_score))
     label = f"{reader.metadata.get('preset', '?')} {cfg.sim.scene} seed {cfg.seed}"
     metrics = Path(mcap).with_suffix(".json")              # dagsbench's metrics file: the run's --set overrides
     if metrics.is_file():
@@ -107,10 +118,32 @@ def rescore(choices: list[Choice], l_r: float, l_c: float, plain: bool) -> dict[
             "dist_m": mean(lambda c, p: c.dist_m[p])}
 
 
+def local_gain_share(choices: list[Choice], before: int) -> dict[str, float]:
+    """Of the choices made in the robot's own subregion (mode ``local``) before step ``before``: the ratio of the
+    subregion's best I_s to the best I_s anywhere in reach (quartiles, counts under 0.5 and 0.3), and how many
+    the best eq. (7) score anywhere would change, with the mean I_s and graph distance of the logged choice and
+    of that one."""
+    local = [c for c in choices if c.mode == "local" and c.step < before and c.finite is not None]
+    if not local:
+        return {"n": 0}
+    ratio = np.array([c.gain[c.pool].max() / c.gain[c.finite].max() if c.gain[c.finite].max() > 0 else 1.0
+                      for c in local])
+    anywhere = [int(np.argmax(np.where(c.finite, c.score, -np.inf))) for c in local]
+    q25, q50 = np.percentile(ratio, [25, 50])
+    return {"n": len(local), "q25": float(q25), "median": float(q50), "under_half": int((ratio < 0.5).sum()),
+            "under_03": int((ratio < 0.3).sum()), "differ": sum(a != c.chosen for a, c in zip(anywhere, local)),
+            "gain": float(np.mean([c.gain[c.chosen] for c in local])),
+            "gain_any": float(np.mean([c.gain[a] for a, c in zip(anywhere, local)])),
+            "dist_m": float(np.mean([c.dist_m[c.chosen] for c in local])),
+            "dist_any_m": float(np.mean([c.dist_m[a] for a, c in zip(anywhere, local)]))}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("mcap", nargs="+", type=Path, help="run logs (dagsrun --record, or dagsbench's OUT/runs/PRESET/)")
     ap.add_argument("--l-r", default="0,10,30", help="comma list of eq. (7) risk weights to re-score with")
+    ap.add_argument("--first-steps", type=int, default=250,
+                    help="the second table reads full's choices in its own subregion before this step")
     args = ap.parse_args(argv)
     try:
         l_rs = [float(x) for x in args.l_r.split(",")]
@@ -126,7 +159,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {label} | {r['n']} | {lr:g}{tag} | {'plain' if plain else 'logged'} | {r['differ']} "
               f"({r['differ_pct']:.0f} %) | {r['gain']:.2f} | {r['risk']:.4f} | {r['dist_m']:.2f} |", flush=True)
 
+    if args.first_steps < 1:
+        sys.exit(f"error: bad --first-steps {args.first_steps}: give a step count >= 1, e.g. 250")
     pooled: dict[tuple[float, bool, float, str], list[Choice]] = {}
+    local_rows: list[tuple[str, list[Choice]]] = []
     for path in args.mcap:
         try:
             label, cfg, choices = read_choices(path)
@@ -139,9 +175,25 @@ def main(argv: list[str] | None = None) -> int:
             tag = " (logged)" if (lr, plain) == own else ""
             row(label, rescore(choices, lr, sel.l_c, plain), lr, plain, tag)
             pooled.setdefault((lr, plain, sel.l_c, tag), []).extend(choices)
+        if sel.variant == "full" and sel.subregion_choice:
+            local_rows.append((label, choices))
     if len(args.mcap) > 1:                          # every choice of the runs together, per setting
         for (lr, plain, l_c, tag), choices in pooled.items():
             row(f"all {len(args.mcap)} runs", rescore(choices, lr, l_c, plain), lr, plain, tag)
+    if local_rows:
+        print(f"\n| run | own-subregion choices before step {args.first_steps} | its best I_s / best anywhere: q25 / "
+              "median | under 0.5 / 0.3 | eq. (7) anywhere differs | I_s: logged / anywhere | graph m: logged / "
+              "anywhere |\n|---|---|---|---|---|---|---|")
+        if len(local_rows) > 1:
+            local_rows.append((f"all {len(local_rows)} runs", [c for _, cs in local_rows for c in cs]))
+        for label, choices in local_rows:
+            r = local_gain_share(choices, args.first_steps)
+            if r["n"] == 0:
+                print(f"| {label} | 0 | - | - | - | - | - |")
+                continue
+            print(f"| {label} | {r['n']} | {r['q25']:.2f} / {r['median']:.2f} | {r['under_half']} / {r['under_03']} | "
+                  f"{r['differ']} | {r['gain']:.1f} / {r['gain_any']:.1f} | "
+                  f"{r['dist_m']:.2f} / {r['dist_any_m']:.2f} |")
     return 0
 
 

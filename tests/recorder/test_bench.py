@@ -684,12 +684,22 @@ def test_choice_weights_gives_back_the_logged_choices(finished, capsys):
             assert c.pool[c.chosen] and np.all(c.dist_m[c.pool] >= 0.0)
             if cfg.selection.variant == "gain_cost":
                 np.testing.assert_allclose(c.plain, c.cost, rtol=0, atol=1e-9)
-    assert mod.main([str(logs[1]), "--l-r", "0,30"]) == 0
+    _, _, choices = mod.read_choices(logs[1])
+    local = [c for c in choices if c.mode == "local"]
+    r = mod.local_gain_share(choices, 10 ** 6)
+    assert r["n"] == len(local) > 0 and 0.0 < r["q25"] <= r["median"] <= 1.0 and r["under_03"] <= r["under_half"]
+    assert r["differ"] > 0 or (r["gain"], r["dist_m"]) == (r["gain_any"], r["dist_any_m"])   # the same choices
+    assert mod.local_gain_share(choices, 0)["n"] == 0
+    assert mod.main([str(logs[1]), "--l-r", "0,30", "--first-steps", str(10 ** 6)]) == 0
     printed = capsys.readouterr().out.splitlines()
     assert printed[0].startswith("| run | choices | l_r | C |") and "30 (logged) | logged | 0 (0 %)" in printed[2]
-    assert len(printed) == 2 + 4                          # logged, then l_r 0 logged, l_r 0 and 30 plain
+    assert printed[6] == "" and "own-subregion choices before step 1000000" in printed[7]   # logged, l_r 0 logged,
+    assert printed[9].startswith("| full tiny-00 seed 0") and f" | {r['n']} | " in printed[9]   # 0 and 30 plain
+    assert len(printed) == 10
     with pytest.raises(SystemExit, match="bad --l-r"):
         mod.main([str(logs[0]), "--l-r", "0,x"])
+    with pytest.raises(SystemExit, match="bad --first-steps"):
+        mod.main([str(logs[0]), "--first-steps", "0"])
     with pytest.raises(SystemExit, match="error: .*missing.mcap"):
         mod.main([str(out / "missing.mcap")])
 
