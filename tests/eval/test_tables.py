@@ -141,9 +141,10 @@ def test_pairs_table_counts_wins_run_against_run():
     diff = t.rows[-2]
     # full - baseline over the 6 pairs: Acc -2 on a, +2 on b; C.R. 10 / 12 / 14 on both; PSNR 5 on a, 2 on b
     assert diff[2:] == ("+0.00 / +1.0 / -1.00", "+0.00 ± 2.19 / +12.0 ± 1.8 / +3.50 ± 1.64")
-    # effect in SD, + = better: Acc 0 / 2.19, C.R. 12 / 1.79, PSNR 3.5 / 1.64; all three 0.5 x 1.0 x Phi(2.13)
-    assert t.rows[-1] == ("effect in SD", "Acc / C.R. / PSNR (all, normal model)", "n/a / n/a / n/a",
-                          "+0.00 / +6.71 / +2.13 (49 %)")
+    # effect in SD, + = better: Acc 0 / 2.19, C.R. 12 / 1.79, PSNR 3.5 / 1.64; all three 0.5 x 1.0 x Phi(2.13);
+    # with Acc and PSNR better together (scene a), at most Acc's 50 %
+    assert t.rows[-1] == ("effect in SD", "Acc / C.R. / PSNR (all: independent, correlated)", "n/a / n/a / n/a",
+                          "+0.00 / +6.71 / +2.13 (49 %, 50 %)")
     assert [b[3] for b in t.best[:-5]] == [True, False] * 3 and not any(any(b) for b in t.best[-5:])
     md = to_markdown(t)
     assert "| a | 0 | C.R. | **all** |" in md
@@ -187,6 +188,29 @@ def test_standardised_effects_and_the_normal_share_on_known_values():
     assert abs(tables.normal_share_on_all([1.46] * 3) - 80.0) < 0.5
     assert tables.standardised_effects(d[:1], specs) == [None, None, None]
     assert tables.normal_share_on_all([1.0, None]) is None
+
+
+def test_correlated_normal_share_keeps_how_the_metrics_move_together():
+    """Uncorrelated pair differences give the independent model's share; metrics that move as one give the
+    share of one of them; the same input gives the same number (no random numbers); too few pairs: None."""
+    from scipy.stats import norm
+
+    specs = [tables.METRIC_BY_KEY[k] for k in ("acc_cm", "cr_pct", "psnr_db")]
+    # orthogonal centred columns (a sample correlation of 0), shifted: Acc -1 (better), C.R. +0.5, PSNR +0
+    h = np.array([[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]])
+    d = h + np.array([-1.0, 0.5, 0.0]) * np.sqrt(4.0 / 3.0)       # sample std of each column: sqrt(4/3)
+    z = tables.standardised_effects(d, specs)
+    np.testing.assert_allclose(z, [1.0, 0.5, 0.0])
+    joint = tables.correlated_normal_share_on_all(d, specs)
+    assert abs(joint - tables.normal_share_on_all(z)) < 0.3 and joint == tables.correlated_normal_share_on_all(d, specs)
+    # one run quality behind all three: Acc down where C.R. and PSNR go up, by the same standardised amount
+    q = np.array([0.3, 1.9, -0.4, 1.2, 0.8, 2.1, -0.7, 1.5])
+    same = np.stack([-q, 2.0 * q, 0.5 * q], axis=1)
+    z1 = tables.standardised_effects(same, specs)[0]
+    assert abs(tables.correlated_normal_share_on_all(same, specs) - 100 * norm.cdf(z1)) < 0.3
+    assert tables.correlated_normal_share_on_all(same, specs) > tables.normal_share_on_all([z1] * 3) + 20
+    assert tables.correlated_normal_share_on_all(d[:1], specs) is None
+    assert tables.correlated_normal_share_on_all(np.zeros((4, 3)), specs) is None
 
 
 def test_win_share_interval_and_sign_test_on_known_values():
