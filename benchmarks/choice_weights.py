@@ -126,8 +126,9 @@ def local_gain_share(choices: list[Choice], before: int) -> dict[str, float]:
     local = [c for c in choices if c.mode == "local" and c.step < before and c.finite is not None]
     if not local:
         return {"n": 0}
-    ratio = np.array([c.gain[c.pool].max() / c.gain[c.finite].max() if c.gain[c.finite].max() > 0 else 1.0
-                      for c in local])
+    best = np.array([c.gain[c.finite].max() for c in local])          # the best I_s anywhere in reach
+    own = np.array([c.gain[c.pool].max() for c in local])             # ... and in the robot's subregion
+    ratio = np.where(best > 0.0, own / np.where(best > 0.0, best, 1.0), 1.0)
     anywhere = [int(np.argmax(np.where(c.finite, c.score, -np.inf))) for c in local]
     q25, q50 = np.percentile(ratio, [25, 50])
     return {"n": len(local), "q25": float(q25), "median": float(q50), "under_half": int((ratio < 0.5).sum()),

@@ -432,18 +432,18 @@ def correlated_normal_share_on_all(diffs: np.ndarray, specs: Sequence[MetricSpec
     from scipy.stats import norm, qmc
 
     d = np.asarray(diffs, np.float64)
-    if d.ndim != 2 or d.shape[0] < 2 or d.shape[1] != len(specs):
+    if d.ndim != 2 or d.shape[1] != len(specs):
         return None
-    signed = d * np.array([1.0 if spec.higher_is_better else -1.0 for spec in specs])
-    mean, std = signed.mean(axis=0), signed.std(axis=0, ddof=1)
-    if not np.all(std > 0.0):
+    effects = standardised_effects(d, specs)            # the means in SD, + better: None below two pairs or spread
+    if any(z is None for z in effects):
         return None
-    corr = np.atleast_2d(np.corrcoef(signed, rowvar=False))
+    corr = np.atleast_2d(np.corrcoef(d * np.array([1.0 if spec.higher_is_better else -1.0 for spec in specs]),
+                                     rowvar=False))   # of the differences signed as the effects are
     w, v = np.linalg.eigh(corr)                        # a square root that also holds for a singular correlation
     root = v * np.sqrt(np.clip(w, 0.0, None))
     u = qmc.Sobol(d.shape[1], scramble=False).random(points) + 0.5 / points   # off the cube's faces
-    z = norm.ppf(u) @ root.T + mean / std
-    return 100.0 * float(np.mean(np.all(z > 0.0, axis=1)))
+    x = norm.ppf(u) @ root.T + np.array(effects)
+    return 100.0 * float(np.mean(np.all(x > 0.0, axis=1)))
 
 
 def _p_text(p: float | None) -> str:
