@@ -15,6 +15,9 @@ are not in it) at 25/50/75/100 % of the run and at its worst step:
 - **false free** (m2): cells the grid holds FREE that lie inside an obstacle (at least one cell
   in from its edge): what rays grazing walls or passing under tables clear.
 - **known free** (%): the share of the true free floor the grid holds FREE.
+- **cut off** (m2): floor that a disc of the planner's radius (``voronoi.robot_radius_m + margin_m``) can
+  travel in the grid and in truth, but that the grid parts from where the robot is: what a doorway held
+  shut keeps out of reach; with the **steps cut off** by at least ``--cut-min`` m2 so far.
 
 Open loop: the frames are the logged ones, so a what-if config changes the grid, not the path.
 """
@@ -58,6 +61,27 @@ def truth_cell(fs, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return inside, np.clip(t[..., 1], 0, rows - 1), np.clip(t[..., 0], 0, cols - 1)
 
 
+def cut_off_m2(grid, occ_cfg, fs, clear_m: np.ndarray, robot_xy: np.ndarray, radius_m: float) -> float:
+    """Area (m2) of the grid's floor that a disc of ``radius_m`` can travel (in the grid and in truth) and that
+    is not 8-connected, for that disc, to the piece nearest the robot at ``robot_xy``."""
+    from scipy import ndimage
+
+    from dynactivegs.selection.voronoi import traversable_mask
+
+    trav = traversable_mask(grid.free(occ_cfg), grid.cell_m, radius_m)
+    if not trav.any():
+        return 0.0
+    lab, _ = ndimage.label(trav, structure=np.ones((3, 3), np.bool_))
+    i, j = np.clip(grid.world_to_cell(np.asarray(robot_xy, np.float64)), 0, np.array(grid.shape) - 1)
+    _, (ri, rj) = ndimage.distance_transform_edt(~trav, return_indices=True)
+    own = lab[ri[i, j], rj[i, j]]
+    h, w = grid.shape
+    ii, jj = np.meshgrid(np.arange(h), np.arange(w), indexing="ij")
+    ok, r, c = truth_cell(fs, grid.cell_to_world(np.stack([ii, jj], axis=-1)))
+    apart = trav & (lab != own) & ok & (clear_m[r, c] >= radius_m)
+    return float(apart.sum()) * grid.cell_m ** 2
+
+
 def grid_errors(grid, occ_cfg, fs, clear_m: np.ndarray, inside_m: np.ndarray, margin_m: float) -> dict[str, float]:
     """false occupied / false free areas (m2) and the known share (%) of the true free floor of one grid."""
     states = grid.states(occ_cfg)
@@ -74,8 +98,10 @@ def grid_errors(grid, occ_cfg, fs, clear_m: np.ndarray, inside_m: np.ndarray, ma
             "known_free_pct": 100.0 * float((true_free & (states == 1)).sum()) * cell_area / max(n_free, 1e-9)}
 
 
-def run_errors(mcap: Path, overrides: list[str], margin_m: float) -> tuple[str, dict[str, list[tuple[int, dict]]]]:
-    """(a label, {config name: [(step, errors)] at the checkpoints and the worst step}) of one run log."""
+def run_errors(mcap: Path, overrides: list[str], margin_m: float,
+               cut_min_m2: float = 0.25) -> tuple[str, dict[str, list[tuple[int, dict]]]]:
+    """(a label, {config name: [(step, errors)] at the checkpoints and the worst step}) of one run log; the
+    errors also hold ``cut_off_m2`` and ``steps_cut`` (the steps so far with at least ``cut_min_m2`` cut off)."""
     from dynactivegs.config import with_overrides
     from dynactivegs.selection.occupancy import OccupancyGrid, update_occupancy
     from replay.source import LogReader
@@ -86,6 +112,8 @@ def run_errors(mcap: Path, overrides: list[str], margin_m: float) -> tuple[str, 
     if overrides:
         configs["what-if"] = with_overrides(cfg, overrides).selection.occupancy
     fs, clear_m, inside_m = truth_maps(cfg.sim)
+    radius_m = cfg.selection.voronoi.robot_radius_m + cfg.selection.voronoi.margin_m
+    steps_cut = dict.fromkeys(configs, 0)
     grids = {k: OccupancyGrid.empty(c.cell_m) for k, c in configs.items()}
     per_step: dict[str, list[tuple[int, dict]]] = {k: [] for k in configs}
     n = 0
@@ -94,7 +122,11 @@ def run_errors(mcap: Path, overrides: list[str], margin_m: float) -> tuple[str, 
         beta = st["/perception"].beta
         for k, c in configs.items():
             grids[k] = update_occupancy(grids[k], c, f.depth_m, f.K, f.T_world_cam, beta)
-            per_step[k].append((st.step, grid_errors(grids[k], c, fs, clear_m, inside_m, margin_m)))
+            e = grid_errors(grids[k], c, fs, clear_m, inside_m, margin_m)
+            e["cut_off_m2"] = cut_off_m2(grids[k], c, fs, clear_m, f.T_world_cam[:2, 3], radius_m)
+            steps_cut[k] += e["cut_off_m2"] >= cut_min_m2
+            e["steps_cut"] = steps_cut[k]
+            per_step[k].append((st.step, e))
         n += 1
     out: dict[str, list[tuple[int, dict]]] = {}
     for k, rows in per_step.items():
@@ -111,23 +143,27 @@ def main() -> None:
                     help="what-if overrides, e.g. selection.occupancy.logodds_max=2.0")
     ap.add_argument("--margin", type=float, default=0.15,
                     help="false occupied cells are at least this far (m) from a true obstacle (default 0.15)")
+    ap.add_argument("--cut-min", type=float, default=0.25,
+                    help="a step counts as cut off when at least this much floor (m2) is (default 0.25)")
     args = ap.parse_args()
     if args.margin < 0:
         sys.exit(f"error: bad --margin {args.margin}: must be >= 0 m")
+    if args.cut_min <= 0:
+        sys.exit(f"error: bad --cut-min {args.cut_min}: must be > 0 m2")
     from dynactivegs.errors import DagsError
 
-    print("| run | config | step | false occupied m2 | false free m2 | known free % |\n|---|---|---|---|---|---|",
-          flush=True)
+    print("| run | config | step | false occupied m2 | false free m2 | known free % | cut off m2 | steps cut off |\n"
+          "|---|---|---|---|---|---|---|---|", flush=True)
     for path in args.mcap:
         try:
-            label, out = run_errors(path, args.set, args.margin)
+            label, out = run_errors(path, args.set, args.margin, args.cut_min)
         except DagsError as e:
             sys.exit(f"error: {e}")
         for k, rows in out.items():
             for i, (step, e) in enumerate(rows):
                 name = f"{step} (worst)" if i == len(FRACTIONS) else str(step)
                 print(f"| {label} | {k} | {name} | {e['false_occ_m2']:.3f} | {e['false_free_m2']:.3f} | "
-                      f"{e['known_free_pct']:.1f} |", flush=True)
+                      f"{e['known_free_pct']:.1f} | {e['cut_off_m2']:.2f} | {e['steps_cut']} |", flush=True)
 
 
 if __name__ == "__main__":

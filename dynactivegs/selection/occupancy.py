@@ -47,6 +47,7 @@ import numpy as np
 from scipy import ndimage
 
 from dynactivegs.errors import check_config
+from dynactivegs.selection.voronoi import traversable_mask
 
 
 
@@ -129,6 +130,12 @@ class OccupancyConfig:
     transient_top_m: float = 1.2
     """A cell is transient (``transient_frames``) only where its highest static obstacle return (``top_m``)
     reached this height: a standing person; tables, seats and counters are lower."""
+    transient_cut_m: float = 0.0
+    """With ``transient_frames``, let a piece of transient cells go only where its going joins pieces of the floor
+    that a disc of this radius can travel and that were apart (the planner's robot radius plus margin, 0.22 m, for
+    the Voronoi graph's own test): a person who stood in a doorway or a passage, not one who stood in the open,
+    where the graph goes round them. A piece that joins nothing now may go later, when more floor is known around
+    it. 0: let every transient piece go (``transient_frames``' plain rule)."""
 
     def __post_init__(self) -> None:
         check_config(0.005 <= self.cell_m <= 1.0, "occupancy.cell_m", self.cell_m, "in [0.005, 1] m")
@@ -152,6 +159,8 @@ class OccupancyConfig:
                      ">= 0 (0: never let a cell go)")
         check_config(self.band_lo_m < self.transient_top_m <= self.band_hi_m, "occupancy.transient_top_m",
                      self.transient_top_m, "in (occupancy.band_lo_m, occupancy.band_hi_m]")
+        check_config(0.0 <= self.transient_cut_m <= 2.0, "occupancy.transient_cut_m", self.transient_cut_m,
+                     "in [0, 2] m (0: let every transient piece go)")
 
 
 @dataclass(frozen=True, slots=True)
@@ -465,7 +474,32 @@ def let_go(grid: OccupancyGrid, cfg: OccupancyConfig, logodds: np.ndarray, top: 
             r = int(round(cfg.transient_clear_m / grid.cell_m))
             yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
             stale &= ndimage.binary_erosion(freed, structure=(yy ** 2 + xx ** 2 <= r * r), border_value=0)
+        if stale.any() and cfg.transient_cut_m > 0.0:
+            stale = joining_pieces(stale, logodds < np.float32(cfg.free_below), grid.cell_m, cfg.transient_cut_m)
         if stale.any():
             logodds = np.where(stale, np.float32(cfg.free_below + cfg.l_free), logodds).astype(np.float32)
             top = np.where(stale, np.float32(0.0), top).astype(np.float32)
     return OccupancyGrid(grid.origin_ij, grid.cell_m, logodds, top, freed, quiet)
+
+
+def joining_pieces(cells: np.ndarray, free: np.ndarray, cell_m: float, radius_m: float) -> np.ndarray:
+    """bool (H, W): the 8-connected pieces of ``cells`` whose going (that piece made free, the others kept) joins
+    floor that a disc of ``radius_m`` can travel (:func:`~dynactivegs.selection.voronoi.traversable_mask`) and that
+    is apart now: some 8-connected blob of the floor that becomes passable touches two or more 8-connected pieces
+    of the floor passable now."""
+    eight = np.ones((3, 3), np.bool_)
+    now = traversable_mask(free, cell_m, radius_m)
+    now_lab, _ = ndimage.label(now, structure=eight)
+    pieces, n = ndimage.label(cells, structure=eight)
+    keep = np.zeros(n + 1, np.bool_)
+    for k in range(1, n + 1):
+        gained = traversable_mask(free | (pieces == k), cell_m, radius_m) & ~now
+        blobs, _ = ndimage.label(gained, structure=eight)
+        for b, sl in enumerate(ndimage.find_objects(blobs), start=1):
+            rows, cols = slice(max(sl[0].start - 1, 0), sl[0].stop + 1), slice(max(sl[1].start - 1, 0), sl[1].stop + 1)
+            ring = ndimage.binary_dilation(blobs[rows, cols] == b, structure=eight)
+            touched = np.unique(now_lab[rows, cols][ring])
+            if np.count_nonzero(touched) >= 2:
+                keep[k] = True
+                break
+    return keep[pieces]

@@ -512,6 +512,32 @@ def test_occupancy_errors_counts_a_false_obstacle_and_a_cleared_wall():
     assert e["known_free_pct"] == pytest.approx(100.0 * (free.sum() - 2) / free.sum())
 
 
+def test_occupancy_errors_measures_floor_a_held_door_cuts_off():
+    """cut_off_m2 on a constructed case: a 2 m room parted by a wall with a 0.6 m door; the robot in the left
+    part. With the door free nothing is cut off; with a person's cells held occupied in it, the right part's floor
+    that the planner's 0.22 m disc can travel (columns 30-35 x rows 4-35 of 5 cm cells, 0.48 m2) is."""
+    from scipy.ndimage import distance_transform_edt
+
+    from dynactivegs.selection.occupancy import OccupancyConfig, OccupancyGrid
+    from dynactivegs.sim.freespace import FreeSpace
+
+    mod = _benchmark_module("occupancy_errors")
+    occ = np.zeros((40, 40), bool)
+    occ[:, 20:26] = True
+    occ[15:27, 20:26] = False                                 # the door, y in [0.75, 1.35)
+    fs = FreeSpace.from_grid(occ, 0.05)
+    clear_m = distance_transform_edt(fs.floor & ~fs.occupied) * 0.05
+    cfg = OccupancyConfig()
+    logodds = np.where(occ, np.float32(2.0), np.float32(-1.0)).astype(np.float32)
+    robot = np.array([0.5, 1.0])
+    assert mod.cut_off_m2(OccupancyGrid((0, 0), 0.05, logodds.copy()), cfg, fs, clear_m, robot, 0.22) == 0.0
+    logodds[18:24, 20:26] = 2.0                               # someone stood in the door
+    held = OccupancyGrid((0, 0), 0.05, logodds)
+    assert mod.cut_off_m2(held, cfg, fs, clear_m, robot, 0.22) == pytest.approx(0.48)
+    assert mod.cut_off_m2(held, cfg, fs, clear_m, np.array([1.7, 1.0]), 0.22) == pytest.approx(
+        0.0025 * 12 * 32)                                       # from the right: the left part, cols 4-15 x rows 4-35
+
+
 def test_path_stats_counts_the_logged_path(finished, capsys, tmp_path):
     """benchmarks/path_stats.py on the sweep's two runs: one action per step, the collisions dagsbench counted,
     the robot's distance driven and cells from its logged poses, the people near it from the logged truth; a

@@ -11,7 +11,8 @@ import pytest
 from dynactivegs.errors import ConfigError
 from dynactivegs.rng import derive_rng
 from dynactivegs.selection._reference import update_occupancy_reference
-from dynactivegs.selection.occupancy import CellState, OccupancyConfig, OccupancyGrid, update_occupancy
+from dynactivegs.selection.occupancy import (CellState, OccupancyConfig, OccupancyGrid, joining_pieces,
+                                             update_occupancy)
 
 from tests.selection.scenes import intrinsics, render_depth, view
 
@@ -179,6 +180,40 @@ def test_what_is_not_a_standing_person_on_seen_floor_is_never_let_go():
     assert g.states(on)[ij] == CellState.OCCUPIED and not g.freed[ij] and g.quiet[ij] == 40
 
 
+def test_joining_pieces_keeps_a_person_in_a_doorway_and_not_one_in_the_open():
+    """5 cm cells, a wall with a 0.6 m door; the disc is the planner's 0.22 m. Only the person in the door
+    parts floor the disc can travel; a person in the open, one in a corner and one in a door too narrow for the
+    disc anyway part nothing."""
+    free = np.ones((60, 120), np.bool_)
+    free[:, 38:42] = False
+    free[25:37, 38:42] = True                      # a 0.6 m door
+    free[:, 78:82] = False
+    free[25:31, 78:82] = True                      # a 0.3 m door: the disc does not pass it free or not
+    people = np.zeros_like(free)
+    people[28:34, 38:42] = True                    # in the wide door
+    people[10:16, 10:16] = True                    # in the open
+    people[0:4, 60:64] = True                      # against the grid's edge
+    people[26:30, 78:82] = True                    # in the narrow door
+    free &= ~people
+    out = joining_pieces(people, free, 0.05, 0.22)
+    assert out[30, 40] and out[28:34, 38:42].all() and out.sum() == 24
+    # with the wide door's other side not yet known free, there is nothing to join
+    alone = free.copy()
+    alone[:, 42:] = False
+    assert not joining_pieces(people & (np.arange(120) < 42), alone, 0.05, 0.22).any()
+    assert not joining_pieces(np.zeros_like(free), free, 0.05, 0.22).any()
+
+
+def test_transient_cut_m_keeps_a_person_who_stood_in_the_open():
+    """With transient_cut_m a let-go needs a join: the person in the open room is kept, at 0 let go."""
+    person = (2.43, 1.33, 2.83, 1.73, 1.8)
+    plain = dataclasses.replace(CFG, transient_frames=20)
+    cut = dataclasses.replace(plain, transient_cut_m=0.22)
+    for cfg, want in ((plain, CellState.FREE), (cut, CellState.OCCUPIED)):
+        g = _stood_then_left_behind(cfg, person, 25)
+        assert g.states(cfg)[tuple(g.world_to_cell(np.array([2.45, 1.5])))] == want, cfg.transient_cut_m
+
+
 def test_rays_passing_high_over_a_low_obstacle_leave_it_occupied():
     seat = (2.03, 1.33, 2.43, 1.73, 0.5)
     depth, K, T, _ = _room_frame(boxes=[seat], x=0.3)             # seen from 1.7 m
@@ -240,3 +275,5 @@ def test_bad_config_values_raise_config_error():
         OccupancyConfig(transient_frames=-1)
     with pytest.raises(ConfigError, match="transient_top_m"):
         OccupancyConfig(transient_top_m=1.6)
+    with pytest.raises(ConfigError, match="transient_cut_m"):
+        OccupancyConfig(transient_cut_m=-0.1)
