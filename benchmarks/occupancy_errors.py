@@ -18,6 +18,9 @@ are not in it) at 25/50/75/100 % of the run and at its worst step:
 - **cut off** (m2): floor that a disc of the planner's radius (``voronoi.robot_radius_m + margin_m``) can
   travel in the grid and in truth, but that the grid parts from where the robot is: what a doorway held
   shut keeps out of reach; with the **steps cut off** by at least ``--cut-min`` m2 so far.
+- **let go** (frames): the frames so far in which ``selection.occupancy.transient_frames`` let cells go (a cell's
+  obstacle top drops back to 0 only then). A run whose what-if lets nothing go would run the same in closed loop:
+  the grid, and so every choice, is the logged one.
 
 Open loop: the frames are the logged ones, so a what-if config changes the grid, not the path.
 """
@@ -82,6 +85,14 @@ def cut_off_m2(grid, occ_cfg, fs, clear_m: np.ndarray, robot_xy: np.ndarray, rad
     return float(apart.sum()) * grid.cell_m ** 2
 
 
+def let_go_any(before, after) -> bool:
+    """Whether the update from grid ``before`` to ``after`` let a cell go: only that sets a cell's obstacle top
+    (which otherwise only rises) back to 0. The grid may have grown: ``before`` sits inside ``after``."""
+    di, dj = before.origin_ij[0] - after.origin_ij[0], before.origin_ij[1] - after.origin_ij[1]
+    h, w = before.shape
+    return bool(((before.top_m > 0) & (after.top_m[di:di + h, dj:dj + w] <= 0)).any())
+
+
 def grid_errors(grid, occ_cfg, fs, clear_m: np.ndarray, inside_m: np.ndarray, margin_m: float) -> dict[str, float]:
     """false occupied / false free areas (m2) and the known share (%) of the true free floor of one grid."""
     states = grid.states(occ_cfg)
@@ -101,7 +112,8 @@ def grid_errors(grid, occ_cfg, fs, clear_m: np.ndarray, inside_m: np.ndarray, ma
 def run_errors(mcap: Path, overrides: list[str], margin_m: float,
                cut_min_m2: float = 0.25) -> tuple[str, dict[str, list[tuple[int, dict]]]]:
     """(a label, {config name: [(step, errors)] at the checkpoints and the worst step}) of one run log; the
-    errors also hold ``cut_off_m2`` and ``steps_cut`` (the steps so far with at least ``cut_min_m2`` cut off)."""
+    errors also hold ``cut_off_m2``, ``steps_cut`` (the steps so far with at least ``cut_min_m2`` cut off) and
+    ``let_go`` (the frames so far that let cells go)."""
     from dynactivegs.config import with_overrides
     from dynactivegs.selection.occupancy import OccupancyGrid, update_occupancy
     from replay.source import LogReader
@@ -113,7 +125,7 @@ def run_errors(mcap: Path, overrides: list[str], margin_m: float,
         configs["what-if"] = with_overrides(cfg, overrides).selection.occupancy
     fs, clear_m, inside_m = truth_maps(cfg.sim)
     radius_m = cfg.selection.voronoi.robot_radius_m + cfg.selection.voronoi.margin_m
-    steps_cut = dict.fromkeys(configs, 0)
+    steps_cut, let_go = dict.fromkeys(configs, 0), dict.fromkeys(configs, 0)
     grids = {k: OccupancyGrid.empty(c.cell_m) for k, c in configs.items()}
     per_step: dict[str, list[tuple[int, dict]]] = {k: [] for k in configs}
     n = 0
@@ -121,11 +133,13 @@ def run_errors(mcap: Path, overrides: list[str], margin_m: float,
         f = st["/frame"]
         beta = st["/perception"].beta
         for k, c in configs.items():
-            grids[k] = update_occupancy(grids[k], c, f.depth_m, f.K, f.T_world_cam, beta)
+            before = grids[k]
+            grids[k] = update_occupancy(before, c, f.depth_m, f.K, f.T_world_cam, beta)
+            let_go[k] += let_go_any(before, grids[k])
             e = grid_errors(grids[k], c, fs, clear_m, inside_m, margin_m)
             e["cut_off_m2"] = cut_off_m2(grids[k], c, fs, clear_m, f.T_world_cam[:2, 3], radius_m)
             steps_cut[k] += e["cut_off_m2"] >= cut_min_m2
-            e["steps_cut"] = steps_cut[k]
+            e["steps_cut"], e["let_go"] = steps_cut[k], let_go[k]
             per_step[k].append((st.step, e))
         n += 1
     out: dict[str, list[tuple[int, dict]]] = {}
@@ -152,8 +166,8 @@ def main() -> None:
         sys.exit(f"error: bad --cut-min {args.cut_min}: must be > 0 m2")
     from dynactivegs.errors import DagsError
 
-    print("| run | config | step | false occupied m2 | false free m2 | known free % | cut off m2 | steps cut off |\n"
-          "|---|---|---|---|---|---|---|---|", flush=True)
+    print("| run | config | step | false occupied m2 | false free m2 | known free % | cut off m2 | steps cut off | "
+          "let go (frames) |\n|---|---|---|---|---|---|---|---|---|", flush=True)
     for path in args.mcap:
         try:
             label, out = run_errors(path, args.set, args.margin, args.cut_min)
@@ -163,7 +177,8 @@ def main() -> None:
             for i, (step, e) in enumerate(rows):
                 name = f"{step} (worst)" if i == len(FRACTIONS) else str(step)
                 print(f"| {label} | {k} | {name} | {e['false_occ_m2']:.3f} | {e['false_free_m2']:.3f} | "
-                      f"{e['known_free_pct']:.1f} | {e['cut_off_m2']:.2f} | {e['steps_cut']} |", flush=True)
+                      f"{e['known_free_pct']:.1f} | {e['cut_off_m2']:.2f} | {e['steps_cut']} | {e['let_go']} |",
+                      flush=True)
 
 
 if __name__ == "__main__":

@@ -538,6 +538,21 @@ def test_occupancy_errors_measures_floor_a_held_door_cuts_off():
         0.0025 * 12 * 32)                                       # from the right: the left part, cols 4-15 x rows 4-35
 
 
+def test_occupancy_errors_sees_a_let_go_through_a_grown_grid():
+    """let_go_any: a cell's obstacle top dropping back to 0 is a let-go, also where the grid grew in between."""
+    from dynactivegs.selection.occupancy import OccupancyGrid
+
+    mod = _benchmark_module("occupancy_errors")
+    top = np.zeros((4, 4), np.float32)
+    top[1, 1] = 1.5
+    before = OccupancyGrid((0, 0), 0.05, np.zeros((4, 4), np.float32), top_m=top)
+    grown_top = np.zeros((6, 6), np.float32)
+    grown_top[3, 2] = 1.5                                     # the same cell, the origin moved by (-2, -1) cells
+    grown = OccupancyGrid((-2, -1), 0.05, np.zeros((6, 6), np.float32), top_m=grown_top)
+    assert not mod.let_go_any(before, before) and not mod.let_go_any(before, grown)
+    assert mod.let_go_any(before, OccupancyGrid((-2, -1), 0.05, np.zeros((6, 6), np.float32)))
+
+
 def test_path_stats_counts_the_logged_path(finished, capsys, tmp_path):
     """benchmarks/path_stats.py on the sweep's two runs: one action per step, the collisions dagsbench counted,
     the robot's distance driven and cells from its logged poses, the people near it from the logged truth; a
