@@ -16,8 +16,8 @@ are not in it) at 25/50/75/100 % of the run and at its worst step:
   in from its edge): what rays grazing walls or passing under tables clear.
 - **known free** (%): the share of the true free floor the grid holds FREE.
 - **cut off** (m2): floor that a disc of the planner's radius (``voronoi.robot_radius_m + margin_m``) can
-  travel in the grid and in truth, but that the grid parts from where the robot is: what a doorway held
-  shut keeps out of reach; with the **steps cut off** by at least ``--cut-min`` m2 so far.
+  travel in the grid and, in truth, reach from where the robot is, but that the grid parts from the robot: what
+  a doorway held shut keeps out of reach; with the **steps cut off** by at least ``--cut-min`` m2 so far.
 - **let go** (frames): the frames so far in which ``selection.occupancy.transient_frames`` let cells go (a cell's
   obstacle top drops back to 0 only then). A run whose what-if lets nothing go would run the same in closed loop:
   the grid, and so every choice, is the logged one.
@@ -65,23 +65,33 @@ def truth_cell(fs, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def cut_off_m2(grid, occ_cfg, fs, clear_m: np.ndarray, robot_xy: np.ndarray, radius_m: float) -> float:
-    """Area (m2) of the grid's floor that a disc of ``radius_m`` can travel (in the grid and in truth) and that
-    is not 8-connected, for that disc, to the piece nearest the robot at ``robot_xy``."""
+    """Area (m2) of the grid's free floor that a disc of ``radius_m`` can travel in the grid and, in truth, reach
+    from the robot at ``robot_xy`` (the truth's floor with ``clear_m`` at least ``radius_m``, 8-connected), but that
+    the grid's occupied cells part, for that disc, from the piece nearest the robot (unseen floor counts as open
+    here): floor that obstacles the grid holds shut off, not floor behind unseen floor or a door too narrow for the
+    disc anyway."""
     from scipy import ndimage
 
     from dynactivegs.selection.voronoi import traversable_mask
 
-    trav = traversable_mask(grid.free(occ_cfg), grid.cell_m, radius_m)
+    eight = np.ones((3, 3), np.bool_)
+    trav = traversable_mask(~grid.occupied(occ_cfg), grid.cell_m, radius_m)   # unseen floor does not part
     if not trav.any():
         return 0.0
-    lab, _ = ndimage.label(trav, structure=np.ones((3, 3), np.bool_))
+    lab, _ = ndimage.label(trav, structure=eight)
     i, j = np.clip(grid.world_to_cell(np.asarray(robot_xy, np.float64)), 0, np.array(grid.shape) - 1)
     _, (ri, rj) = ndimage.distance_transform_edt(~trav, return_indices=True)
     own = lab[ri[i, j], rj[i, j]]
+    true_trav = clear_m >= radius_m
+    true_lab, _ = ndimage.label(true_trav, structure=eight)
+    ok_r, tr, tc = truth_cell(fs, np.asarray(robot_xy, np.float64))
+    _, (ti, tj) = ndimage.distance_transform_edt(~true_trav, return_indices=True)
+    true_own = true_lab[ti[tr, tc], tj[tr, tc]] if true_trav.any() else -1
     h, w = grid.shape
     ii, jj = np.meshgrid(np.arange(h), np.arange(w), indexing="ij")
     ok, r, c = truth_cell(fs, grid.cell_to_world(np.stack([ii, jj], axis=-1)))
-    apart = trav & (lab != own) & ok & (clear_m[r, c] >= radius_m)
+    known = traversable_mask(grid.free(occ_cfg), grid.cell_m, radius_m)
+    apart = known & (lab != own) & ok & (true_lab[r, c] == true_own)
     return float(apart.sum()) * grid.cell_m ** 2
 
 
