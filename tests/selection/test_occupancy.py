@@ -202,6 +202,9 @@ def test_joining_pieces_keeps_a_person_in_a_doorway_and_not_one_in_the_open():
     alone[:, 42:] = False
     assert not joining_pieces(people & (np.arange(120) < 42), alone, 0.05, 0.22).any()
     assert not joining_pieces(np.zeros_like(free), free, 0.05, 0.22).any()
+    # the wide door joins 3.44 m2 of the disc's positions (left, round the person in the open) to 3.535 m2
+    assert joining_pieces(people, free, 0.05, 0.22, min_piece_m2=3.43).sum() == 24
+    assert not joining_pieces(people, free, 0.05, 0.22, min_piece_m2=3.45).any()
 
 
 def test_transient_cut_m_keeps_a_person_who_stood_in_the_open():
@@ -277,3 +280,5 @@ def test_bad_config_values_raise_config_error():
         OccupancyConfig(transient_top_m=1.6)
     with pytest.raises(ConfigError, match="transient_cut_m"):
         OccupancyConfig(transient_cut_m=-0.1)
+    with pytest.raises(ConfigError, match="transient_cut_min_m2"):
+        OccupancyConfig(transient_cut_min_m2=-1.0)
