@@ -17,6 +17,9 @@ runs found in both with the same steps and config, and prints two Markdown table
   is the same; a last line per method gives the pairs won in A and in B and how many outcomes agree.
 
 With ``--png`` it draws B against A per metric (one point per run, coloured by preset, the line y = x).
+With ``--ignore-set`` a run's ``--set`` overrides are left out of its label, so a run made with an override that
+is the default now matches one made without it (their configs must still agree; a folder holding one preset's run
+with two configs is then refused).
 """
 
 from __future__ import annotations
@@ -40,14 +43,15 @@ from recorder.bench import config_difference  # noqa: E402
 Key = tuple[str, str, int]                          # (preset and its overrides, scene, seed)
 
 
-def label(run: dict[str, Any]) -> str:
-    """The run's preset, with its ``--set`` overrides if any (variants of one preset kept apart)."""
-    return " ".join([str(run["preset"]), *map(str, run.get("overrides") or ())])
+def label(run: dict[str, Any], ignore_set: bool = False) -> str:
+    """The run's preset, with its ``--set`` overrides if any (variants of one preset kept apart) unless
+    ``ignore_set``."""
+    return " ".join([str(run["preset"]), *([] if ignore_set else map(str, run.get("overrides") or ()))])
 
 
-def load_folder(folder: Path) -> dict[Key, dict[str, Any]]:
+def load_folder(folder: Path, ignore_set: bool = False) -> dict[Key, dict[str, Any]]:
     """Every metrics file under ``folder``'s ``runs`` folders, by (preset, scene, seed); two files of one run
-    (the same run copied into two subfolders) must agree."""
+    (the same run copied into two subfolders) must agree, in their config too with ``ignore_set``."""
     folder = Path(folder)
     if not folder.is_dir():
         raise DagsError(f"{folder}: no such results folder; give a dagsbench --out folder")
@@ -55,12 +59,14 @@ def load_folder(folder: Path) -> dict[Key, dict[str, Any]]:
     for p in sorted(folder.rglob("runs/**/*.json")):
         try:
             r = json.loads(p.read_text())
-            key = (label(r), str(r["scene"]), int(r["seed"]))
+            key = (label(r, ignore_set), str(r["scene"]), int(r["seed"]))
             vals = _values(r)
         except (json.JSONDecodeError, KeyError, IndexError, TypeError, ValueError, AttributeError):
             raise DagsError(f"{p}: not a dagsbench metrics file (or a truncated one); remove it or re-run it") from None
-        if key in out and _values(out[key]) != vals:
-            raise DagsError(f"{folder}: two metrics files of {key} differ; keep one")
+        if key in out and (_values(out[key]) != vals or (ignore_set and config_difference(
+                out[key].get("config") or {}, r.get("config") or {}))):
+            raise DagsError(f"{folder}: two metrics files of {key} differ; keep one"
+                            + (" or give a folder holding one config of it" if ignore_set else ""))
         out[key] = r
     if not out:
         raise DagsError(f"{folder}: no metrics files under a runs/ folder; give a dagsbench --out folder")
@@ -187,9 +193,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("b", type=Path, help="another one holding some of the same runs")
     ap.add_argument("--reference", default="baseline", help="the preset the others are put against pair by pair")
     ap.add_argument("--png", type=Path, default=None, help="draw B against A per metric into this PNG")
+    ap.add_argument("--ignore-set", action="store_true",
+                    help="match runs by preset, scene, seed and config, not by their --set overrides")
     args = ap.parse_args(argv)
     try:
-        a, b = load_folder(args.a), load_folder(args.b)
+        a, b = load_folder(args.a, args.ignore_set), load_folder(args.b, args.ignore_set)
         keys, other = common_runs(a, b)
         if not keys:
             raise DagsError(f"{args.a} and {args.b} hold no run in common (same preset, scene, seed, steps and "

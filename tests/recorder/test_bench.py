@@ -899,6 +899,22 @@ def test_compare_runs_sets_the_same_runs_side_by_side(tmp_path, capsys):
     assert mod.config_difference({"selection": {"l_r": 1}}, {"selection": {"l_r": 1, "local_people_steps": 3}}) == \
         ["selection.local_people_steps"]
     assert mod.config_difference({"selection": {"local_people_steps": 0}}, {"selection": {"l_r": 1}}) == []
+    # --ignore-set: a run made with an override that is the default now matches one made without it
+    for folder, overrides, steps in (("c", ["selection.local_people_steps=3"], 3), ("d", [], 3), ("e", [], 0)):
+        r = fake_run("full", "s0", 0, acc=2.0, cr=90.0, psnr=24.0)
+        r["overrides"], r["config"] = overrides, {"selection": {"local_people_steps": steps}}
+        (tmp_path / folder / "runs" / "full").mkdir(parents=True)
+        (tmp_path / folder / "runs" / "full" / "s0-seed0.json").write_text(json.dumps(r))
+    capsys.readouterr()
+    assert mod.main([str(tmp_path / "c"), str(tmp_path / "d")]) == 2          # labels differ: nothing in common
+    assert mod.main([str(tmp_path / "c"), str(tmp_path / "d"), "--ignore-set"]) == 0
+    assert "| full | s0 | 0 |" in capsys.readouterr().out
+    assert mod.main([str(tmp_path / "c"), str(tmp_path / "e"), "--ignore-set"]) == 2   # the configs differ
+    (tmp_path / "c" / "more" / "runs" / "full").mkdir(parents=True)
+    (tmp_path / "c" / "more" / "runs" / "full" / "s0-seed0.json").write_text(
+        (tmp_path / "e" / "runs" / "full" / "s0-seed0.json").read_text())
+    assert mod.main([str(tmp_path / "c"), str(tmp_path / "d"), "--ignore-set"]) == 2
+    assert "give a folder holding one config of it" in capsys.readouterr().err
     # bad input: one line, exit 2
     assert mod.main([str(tmp_path / "a"), str(tmp_path / "nowhere")]) == 2
     assert "no such results folder" in capsys.readouterr().err
