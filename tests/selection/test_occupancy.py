@@ -11,7 +11,7 @@ import pytest
 from dynactivegs.errors import ConfigError
 from dynactivegs.rng import derive_rng
 from dynactivegs.selection._reference import update_occupancy_reference
-from dynactivegs.selection.occupancy import (CellState, OccupancyConfig, OccupancyGrid, joining_pieces,
+from dynactivegs.selection.occupancy import (CellState, OccupancyConfig, OccupancyGrid, joining_pieces, let_go,
                                              update_occupancy)
 
 from tests.selection.scenes import intrinsics, render_depth, view
@@ -217,6 +217,51 @@ def test_transient_cut_m_keeps_a_person_who_stood_in_the_open():
         assert g.states(cfg)[tuple(g.world_to_cell(np.array([2.45, 1.5])))] == want, cfg.transient_cut_m
 
 
+def _two_doors_grid(cfg: OccupancyConfig, pieces: list[tuple[tuple[slice, slice], float, bool]]) -> OccupancyGrid:
+    """5 cm cells, 3 m x 6 m: walls at x 1.9-2.1 m and 3.9-4.1 m, each with a 0.6 m door (y 1.25-1.85 m), floor
+    seen free everywhere else; ``pieces``: ((rows, cols), top m, freed) of cells held occupied, quiet 100 frames
+    like the walls."""
+    logodds = np.full((60, 120), cfg.logodds_min, np.float32)
+    top = np.zeros((60, 120), np.float32)
+    freed = np.ones((60, 120), np.bool_)
+    for c in (slice(38, 42), slice(78, 82)):
+        logodds[:, c], top[:, c], freed[:, c] = 2.0, 2.0, False
+        logodds[25:37, c], top[25:37, c], freed[25:37, c] = cfg.logodds_min, 0.0, True
+    for (rows, cols), t, f in pieces:
+        logodds[rows, cols], top[rows, cols], freed[rows, cols] = 0.9, t, f
+    return OccupancyGrid((0, 0), 0.05, logodds, top, freed, np.full((60, 120), 100, np.int32))
+
+
+def test_the_cut_rule_lets_go_a_person_who_shut_a_door_and_nothing_else():
+    """transient_cut_m: a person-high piece in the first door goes though its floor was never seen free before
+    it (the plain rule keeps it); a chair-high piece not seen free before (the second door), a person in the open,
+    a piece larger than transient_piece_m2 and the walls (quiet, tall, but one large piece) stay."""
+    cut = dataclasses.replace(OccupancyConfig(cell_m=0.05), transient_frames=50, transient_cut_m=0.22)
+    door, chair, open_floor = (slice(30, 32), slice(39, 41)), (slice(30, 32), slice(79, 81)), (slice(10, 12),
+                                                                                              slice(10, 12))
+    g = _two_doors_grid(cut, [(door, 1.5, False), (chair, 0.8, False), (open_floor, 1.5, False)])
+    nothing = np.zeros(g.shape, np.bool_)
+    after = let_go(g, cut, g.logodds, g.top_m, nothing)
+    assert after.free(cut)[door].all() and (after.top_m[door] == 0).all()
+    changed = after.logodds != g.logodds
+    assert changed.sum() == 4                                       # only the door's piece
+    plain = dataclasses.replace(cut, transient_cut_m=0.0)
+    assert (let_go(g, plain, g.logodds, g.top_m, nothing).logodds == g.logodds).all()
+    # the chair-high piece goes once it was seen free before its first return
+    g2 = _two_doors_grid(cut, [(chair, 0.8, True)])
+    assert let_go(g2, cut, g2.logodds, g2.top_m, nothing).free(cut)[chair].all()
+    # too big a piece: the door's 0.01 m2 above transient_piece_m2; the floor of a door shut whole joins its walls,
+    # one piece with them, far too big
+    small = dataclasses.replace(cut, transient_piece_m2=0.005)
+    assert not let_go(g, small, g.logodds, g.top_m, nothing).free(small)[door].any()
+    g3 = _two_doors_grid(cut, [((slice(25, 37), slice(78, 82)), 1.5, True)])
+    assert not let_go(g3, cut, g3.logodds, g3.top_m, nothing).free(cut)[25:37, 78:82].any()
+    # a return in the last transient_frames frames keeps it (the person is still there)
+    g4 = OccupancyGrid(g.origin_ij, g.cell_m, g.logodds, g.top_m, g.freed, np.where(
+        np.arange(120) == 39, 10, g.quiet).astype(np.int32))
+    assert not let_go(g4, cut, g4.logodds, g4.top_m, nothing).free(cut)[door].any()
+
+
 def test_rays_passing_high_over_a_low_obstacle_leave_it_occupied():
     seat = (2.03, 1.33, 2.43, 1.73, 0.5)
     depth, K, T, _ = _room_frame(boxes=[seat], x=0.3)             # seen from 1.7 m
@@ -282,3 +327,5 @@ def test_bad_config_values_raise_config_error():
         OccupancyConfig(transient_cut_m=-0.1)
     with pytest.raises(ConfigError, match="transient_cut_min_m2"):
         OccupancyConfig(transient_cut_min_m2=-1.0)
+    with pytest.raises(ConfigError, match="transient_ring_free"):
+        OccupancyConfig(transient_ring_free=1.5)
