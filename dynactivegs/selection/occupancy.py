@@ -495,6 +495,7 @@ def let_go(grid: OccupancyGrid, cfg: OccupancyConfig, logodds: np.ndarray, top: 
     (:attr:`OccupancyConfig.transient_frames`; nothing changes at 0)."""
     freed = grid.freed | ((logodds <= np.float32(cfg.logodds_min)) & (top <= 0.0))
     quiet = np.where(seen_occ, 0, np.minimum(grid.quiet, np.iinfo(np.int32).max - 1) + 1).astype(np.int32)
+    stale = None
     if cfg.transient_frames > 0 and cfg.transient_cut_m > 0.0:               # the cut rule
         stale = shut_pieces(logodds, top, freed, quiet, grid.cell_m, cfg)
         if stale.any():
@@ -507,10 +508,9 @@ def let_go(grid: OccupancyGrid, cfg: OccupancyConfig, logodds: np.ndarray, top: 
             r = int(round(cfg.transient_clear_m / grid.cell_m))
             yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
             stale &= ndimage.binary_erosion(freed, structure=(yy ** 2 + xx ** 2 <= r * r), border_value=0)
-    if cfg.transient_frames > 0:
-        if stale.any():
-            logodds = np.where(stale, np.float32(cfg.free_below + cfg.l_free), logodds).astype(np.float32)
-            top = np.where(stale, np.float32(0.0), top).astype(np.float32)
+    if stale is not None and stale.any():
+        logodds = np.where(stale, np.float32(cfg.free_below + cfg.l_free), logodds).astype(np.float32)
+        top = np.where(stale, np.float32(0.0), top).astype(np.float32)
     return OccupancyGrid(grid.origin_ij, grid.cell_m, logodds, top, freed, quiet)
 
 
