@@ -64,29 +64,38 @@ def truth_cell(fs, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return inside, np.clip(t[..., 1], 0, rows - 1), np.clip(t[..., 0], 0, cols - 1)
 
 
-def cut_off_m2(grid, occ_cfg, fs, clear_m: np.ndarray, robot_xy: np.ndarray, radius_m: float) -> float:
+def truth_pieces(clear_m: np.ndarray, radius_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The truth map's floor a disc of ``radius_m`` can travel (``clear_m`` at least ``radius_m``), once per run:
+    (int labels of its 8-connected pieces, 0 elsewhere; row and column of each cell's nearest such floor)."""
+    from scipy import ndimage
+
+    passable = clear_m >= radius_m
+    labels, _ = ndimage.label(passable, structure=np.ones((3, 3), np.bool_))
+    _, (near_r, near_c) = ndimage.distance_transform_edt(~passable, return_indices=True)
+    return labels, near_r, near_c
+
+
+def cut_off_m2(grid, occ_cfg, fs, truth: tuple[np.ndarray, np.ndarray, np.ndarray], robot_xy: np.ndarray,
+               radius_m: float) -> float:
     """Area (m2) of the grid's free floor that a disc of ``radius_m`` can travel in the grid and, in truth, reach
-    from the robot at ``robot_xy`` (the truth's floor with ``clear_m`` at least ``radius_m``, 8-connected), but that
-    the grid's occupied cells part, for that disc, from the piece nearest the robot (unseen floor counts as open
+    from the robot at ``robot_xy`` (the truth's pieces, :func:`truth_pieces` for the same radius), but that the
+    grid's occupied cells part, for that disc, from the piece nearest the robot (unseen floor counts as open
     here): floor that obstacles the grid holds shut off, not floor behind unseen floor or a door too narrow for the
     disc anyway."""
     from scipy import ndimage
 
     from dynactivegs.selection.voronoi import traversable_mask
 
-    eight = np.ones((3, 3), np.bool_)
     trav = traversable_mask(~grid.occupied(occ_cfg), grid.cell_m, radius_m)   # unseen floor does not part
-    if not trav.any():
+    true_lab, near_r, near_c = truth
+    if not trav.any() or not true_lab.any():
         return 0.0
-    lab, _ = ndimage.label(trav, structure=eight)
+    lab, _ = ndimage.label(trav, structure=np.ones((3, 3), np.bool_))
     i, j = np.clip(grid.world_to_cell(np.asarray(robot_xy, np.float64)), 0, np.array(grid.shape) - 1)
     _, (ri, rj) = ndimage.distance_transform_edt(~trav, return_indices=True)
     own = lab[ri[i, j], rj[i, j]]
-    true_trav = clear_m >= radius_m
-    true_lab, _ = ndimage.label(true_trav, structure=eight)
-    ok_r, tr, tc = truth_cell(fs, np.asarray(robot_xy, np.float64))
-    _, (ti, tj) = ndimage.distance_transform_edt(~true_trav, return_indices=True)
-    true_own = true_lab[ti[tr, tc], tj[tr, tc]] if true_trav.any() else -1
+    _, tr, tc = truth_cell(fs, np.asarray(robot_xy, np.float64))
+    true_own = true_lab[near_r[tr, tc], near_c[tr, tc]]
     h, w = grid.shape
     ii, jj = np.meshgrid(np.arange(h), np.arange(w), indexing="ij")
     ok, r, c = truth_cell(fs, grid.cell_to_world(np.stack([ii, jj], axis=-1)))
@@ -135,6 +144,7 @@ def run_errors(mcap: Path, overrides: list[str], margin_m: float,
         configs["what-if"] = with_overrides(cfg, overrides).selection.occupancy
     fs, clear_m, inside_m = truth_maps(cfg.sim)
     radius_m = cfg.selection.voronoi.robot_radius_m + cfg.selection.voronoi.margin_m
+    truth = truth_pieces(clear_m, radius_m)
     steps_cut, let_go = dict.fromkeys(configs, 0), dict.fromkeys(configs, 0)
     grids = {k: OccupancyGrid.empty(c.cell_m) for k, c in configs.items()}
     per_step: dict[str, list[tuple[int, dict]]] = {k: [] for k in configs}
@@ -147,7 +157,7 @@ def run_errors(mcap: Path, overrides: list[str], margin_m: float,
             grids[k] = update_occupancy(before, c, f.depth_m, f.K, f.T_world_cam, beta)
             let_go[k] += let_go_any(before, grids[k])
             e = grid_errors(grids[k], c, fs, clear_m, inside_m, margin_m)
-            e["cut_off_m2"] = cut_off_m2(grids[k], c, fs, clear_m, f.T_world_cam[:2, 3], radius_m)
+            e["cut_off_m2"] = cut_off_m2(grids[k], c, fs, truth, f.T_world_cam[:2, 3], radius_m)
             steps_cut[k] += e["cut_off_m2"] >= cut_min_m2
             e["steps_cut"], e["let_go"] = steps_cut[k], let_go[k]
             per_step[k].append((st.step, e))

@@ -530,22 +530,22 @@ def test_occupancy_errors_measures_floor_a_held_door_cuts_off():
     clear_m = distance_transform_edt(fs.floor & ~fs.occupied) * 0.05
     cfg = OccupancyConfig()
     logodds = np.where(occ, np.float32(2.0), np.float32(-1.0)).astype(np.float32)
-    robot = np.array([0.5, 1.0])
-    assert mod.cut_off_m2(OccupancyGrid((0, 0), 0.05, logodds.copy()), cfg, fs, clear_m, robot, 0.22) == 0.0
+    robot, truth = np.array([0.5, 1.0]), mod.truth_pieces(clear_m, 0.22)
+    assert mod.cut_off_m2(OccupancyGrid((0, 0), 0.05, logodds.copy()), cfg, fs, truth, robot, 0.22) == 0.0
     unseen = logodds.copy()
     unseen[15:27, 20:26] = 0.0                                # the door's floor not seen yet: not shut
-    assert mod.cut_off_m2(OccupancyGrid((0, 0), 0.05, unseen), cfg, fs, clear_m, robot, 0.22) == 0.0
+    assert mod.cut_off_m2(OccupancyGrid((0, 0), 0.05, unseen), cfg, fs, truth, robot, 0.22) == 0.0
     logodds[18:24, 20:26] = 2.0                               # someone stood in the door
     held = OccupancyGrid((0, 0), 0.05, logodds)
-    assert mod.cut_off_m2(held, cfg, fs, clear_m, robot, 0.22) == pytest.approx(0.48)
-    assert mod.cut_off_m2(held, cfg, fs, clear_m, np.array([1.7, 1.0]), 0.22) == pytest.approx(
+    assert mod.cut_off_m2(held, cfg, fs, truth, robot, 0.22) == pytest.approx(0.48)
+    assert mod.cut_off_m2(held, cfg, fs, truth, np.array([1.7, 1.0]), 0.22) == pytest.approx(
         0.0025 * 12 * 32)                                       # from the right: the left part, cols 4-15 x rows 4-35
     narrow = occ.copy()
     narrow[15:21, 20:26] = True                               # a 0.3 m door: the disc is parted in truth too
     fs_narrow = FreeSpace.from_grid(narrow, 0.05)
     clear_narrow = distance_transform_edt(fs_narrow.floor & ~fs_narrow.occupied) * 0.05
     shut = OccupancyGrid((0, 0), 0.05, np.where(narrow, np.float32(2.0), np.float32(-1.0)).astype(np.float32))
-    assert mod.cut_off_m2(shut, cfg, fs_narrow, clear_narrow, robot, 0.22) == 0.0
+    assert mod.cut_off_m2(shut, cfg, fs_narrow, mod.truth_pieces(clear_narrow, 0.22), robot, 0.22) == 0.0
 
 
 def test_occupancy_errors_sees_a_let_go_through_a_grown_grid():
