@@ -505,13 +505,18 @@ def let_go(grid: OccupancyGrid, cfg: OccupancyConfig, logodds: np.ndarray, top: 
         stale = (freed & (quiet >= cfg.transient_frames) & (top >= np.float32(cfg.transient_top_m))
                  & (logodds > np.float32(cfg.free_below)))
         if stale.any():                            # the floor-all-round test only where a cell could go
-            r = int(round(cfg.transient_clear_m / grid.cell_m))
-            yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
-            stale &= ndimage.binary_erosion(freed, structure=(yy ** 2 + xx ** 2 <= r * r), border_value=0)
+            stale &= ndimage.binary_erosion(freed, structure=_clear_disc(cfg, grid.cell_m), border_value=0)
     if stale is not None and stale.any():
         logodds = np.where(stale, np.float32(cfg.free_below + cfg.l_free), logodds).astype(np.float32)
         top = np.where(stale, np.float32(0.0), top).astype(np.float32)
     return OccupancyGrid(grid.origin_ij, grid.cell_m, logodds, top, freed, quiet)
+
+
+def _clear_disc(cfg: OccupancyConfig, cell_m: float) -> np.ndarray:
+    """bool (2r+1, 2r+1): the cells within ``transient_clear_m`` of a centre cell (r in cells, rounded)."""
+    r = int(round(cfg.transient_clear_m / cell_m))
+    yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
+    return yy ** 2 + xx ** 2 <= r * r
 
 
 def shut_pieces(logodds: np.ndarray, top: np.ndarray, freed: np.ndarray, quiet: np.ndarray, cell_m: float,
@@ -530,9 +535,8 @@ def shut_pieces(logodds: np.ndarray, top: np.ndarray, freed: np.ndarray, quiet: 
     n_freed = np.bincount(flat, weights=freed.ravel(), minlength=n + 1)
     ok = (area <= cfg.transient_piece_m2 + 1e-9) & (n_freed * cell_m ** 2 >= area - 1e-9)     # every cell freed
     ok[0] = False
-    r = int(round(cfg.transient_clear_m / cell_m))
-    yy, xx = np.mgrid[-r:r + 1, -r:r + 1]
-    disc = yy ** 2 + xx ** 2 <= r * r
+    disc = _clear_disc(cfg, cell_m)
+    r = disc.shape[0] // 2
     free = logodds < np.float32(cfg.free_below)
     h, w = cand.shape
     for k, sl in enumerate(ndimage.find_objects(pieces), start=1):
