@@ -564,13 +564,22 @@ def joining_pieces(cells: np.ndarray, free: np.ndarray, cell_m: float, radius_m:
         now_lab = np.where(area[now_lab] >= min_piece_m2, now_lab, 0)
     pieces, n = ndimage.label(cells, structure=eight)
     keep = np.zeros(n + 1, np.bool_)
-    for k in range(1, n + 1):
-        gained = traversable_mask(free | (pieces == k), cell_m, radius_m) & ~now
+    pad = int(np.ceil(radius_m / cell_m)) + 1          # a piece changes the disc's floor within radius_m of it only
+    h, w = cells.shape
+    for k, sl in enumerate(ndimage.find_objects(pieces), start=1):
+        # the window holds every cell within 2 pads of the piece; the inner part's clearance test sees the
+        # whole grid's obstacles (those within a pad), so the floor gained there is the whole grid's
+        win = tuple(slice(max(s.start - 2 * pad, 0), min(s.stop + 2 * pad, m)) for s, m in zip(sl, (h, w)))
+        inner = tuple(slice(max(s.start - pad, 0) - ws.start, min(s.stop + pad, m) - ws.start)
+                      for s, ws, m in zip(sl, win, (h, w)))
+        gained = (traversable_mask(free[win] | (pieces[win] == k), cell_m, radius_m) & ~now[win])[inner]
+        lab_w = now_lab[win][inner]
         blobs, _ = ndimage.label(gained, structure=eight)
-        for b, sl in enumerate(ndimage.find_objects(blobs), start=1):
-            rows, cols = slice(max(sl[0].start - 1, 0), sl[0].stop + 1), slice(max(sl[1].start - 1, 0), sl[1].stop + 1)
+        for b, bs in enumerate(ndimage.find_objects(blobs), start=1):
+            rows = slice(max(bs[0].start - 1, 0), bs[0].stop + 1)
+            cols = slice(max(bs[1].start - 1, 0), bs[1].stop + 1)
             ring = ndimage.binary_dilation(blobs[rows, cols] == b, structure=eight)
-            touched = np.unique(now_lab[rows, cols][ring])
+            touched = np.unique(lab_w[rows, cols][ring])
             if np.count_nonzero(touched) >= 2:
                 keep[k] = True
                 break

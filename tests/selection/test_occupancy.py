@@ -7,12 +7,14 @@ import math
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 from dynactivegs.errors import ConfigError
 from dynactivegs.rng import derive_rng
 from dynactivegs.selection._reference import update_occupancy_reference
 from dynactivegs.selection.occupancy import (CellState, OccupancyConfig, OccupancyGrid, joining_pieces, let_go,
                                              update_occupancy)
+from dynactivegs.selection.voronoi import traversable_mask
 
 from tests.selection.scenes import intrinsics, render_depth, view
 
@@ -206,6 +208,54 @@ def test_joining_pieces_keeps_a_person_in_a_doorway_and_not_one_in_the_open():
     assert joining_pieces(people, free, 0.05, 0.22, min_piece_m2=3.43).sum() == 24
     assert not joining_pieces(people, free, 0.05, 0.22, min_piece_m2=3.45).any()
 
+
+
+def _joining_pieces_whole_grid(cells, free, cell_m, radius_m, min_piece_m2):
+    """joining_pieces' definition read literally: every piece's floor recomputed over the whole grid."""
+    eight = np.ones((3, 3), np.bool_)
+    now = traversable_mask(free, cell_m, radius_m)
+    now_lab, n_now = ndimage.label(now, structure=eight)
+    area = np.bincount(now_lab.ravel(), minlength=n_now + 1) * cell_m ** 2
+    now_lab = np.where(area[now_lab] >= min_piece_m2, now_lab, 0)
+    pieces, n = ndimage.label(cells, structure=eight)
+    keep = np.zeros(n + 1, np.bool_)
+    for k in range(1, n + 1):
+        gained = traversable_mask(free | (pieces == k), cell_m, radius_m) & ~now
+        blobs, m = ndimage.label(gained, structure=eight)
+        keep[k] = any(np.count_nonzero(np.unique(now_lab[ndimage.binary_dilation(blobs == b, structure=eight)])) >= 2
+                      for b in range(1, m + 1))
+    return keep[pieces]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_joining_pieces_looks_only_near_each_piece_and_agrees_with_the_whole_grid(seed):
+    """Random walls with doors and random small pieces, some against the grid's edge, and one door shut by a
+    piece: the windowed search keeps exactly the pieces the whole-grid definition keeps."""
+    rng = derive_rng(seed, "joining-pieces")
+    free = np.ones((70, 90), np.bool_)
+    free[:, 40:43] = False                               # a 0.6 m door with a piece shutting it
+    free[20:32, 40:43] = True
+    for _ in range(4):                                   # walls across the grid with a door of 6-14 cells
+        if rng.random() < 0.5:
+            c = int(rng.integers(5, 85))
+            free[:, c:c + 3] = False
+            d = int(rng.integers(0, 60))
+            free[d:d + int(rng.integers(6, 15)), c:c + 3] = True
+        else:
+            r = int(rng.integers(5, 65))
+            free[r:r + 3, :] = False
+            d = int(rng.integers(0, 80))
+            free[r:r + 3, d:d + int(rng.integers(6, 15))] = True
+    cells = np.zeros_like(free)
+    cells[25:27, 40:43] = True
+    for _ in range(25):
+        i, j = int(rng.integers(0, 68)), int(rng.integers(0, 88))
+        cells[i:i + int(rng.integers(1, 4)), j:j + int(rng.integers(1, 4))] = True
+    free &= ~cells
+    for radius_m, min_m2 in ((0.22, 0.0), (0.22, 0.5), (0.12, 0.0)):
+        want = _joining_pieces_whole_grid(cells, free, 0.05, radius_m, min_m2)
+        assert (joining_pieces(cells, free, 0.05, radius_m, min_m2) == want).all(), (radius_m, min_m2)
+        assert want.any() or radius_m < 0.2 or min_m2 > 0.0     # the door's piece joins for the planner's disc
 
 def test_transient_cut_m_keeps_a_person_who_stood_in_the_open():
     """With transient_cut_m a let-go needs a join: the person in the open room is kept, at 0 let go."""
