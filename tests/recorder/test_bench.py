@@ -921,3 +921,15 @@ def test_compare_runs_sets_the_same_runs_side_by_side(tmp_path, capsys):
     (tmp_path / "b" / "runs" / "baseline" / "s1-seed0.json").write_text("{\"preset\": ")
     assert mod.main([str(tmp_path / "a"), str(tmp_path / "b")]) == 2
     assert "not a dagsbench metrics file" in capsys.readouterr().err
+
+
+def test_bench_occupancy_rules_times_three_grids_on_a_log(finished):
+    """benchmarks/bench_occupancy_rules.py on the sweep's full run (6 steps): three configs, each timed over
+    every frame but the first, none letting a cell go (50 quiet frames cannot pass in 6 steps)."""
+    _, logs = _sweep_logs(finished)
+    mod = _benchmark_module("bench_occupancy_rules")
+    label, out = mod.time_rules(logs[1], 1000, 50)
+    assert label == "tiny-00 seed 0" and len(out) == 3 and list(out)[0] == "logged"
+    for r in out.values():
+        assert r["frames"] == 5 and r["let_go"] == 0 and 0.0 < r["median_ms"] <= r["max_ms"]
+    assert all(r["frames"] == 2 for r in mod.time_rules(logs[1], 3, 50)[1].values())
