@@ -18,7 +18,7 @@ from dynactivegs.selection.voronoi import traversable_mask
 
 from tests.selection.scenes import intrinsics, render_depth, view
 
-CFG = OccupancyConfig(cell_m=0.1)
+CFG = OccupancyConfig(cell_m=0.1, transient_frames=0)     # no let-go rule; their tests turn one on
 
 
 def _random_frame(rng: np.random.Generator, w: int, h: int):
@@ -149,7 +149,7 @@ def test_a_person_who_stood_where_the_floor_was_seen_free_is_let_go_after_transi
     """A calm person left occupied cells on floor seen free before; with the robot looking away nothing clears
     them. transient_frames lets them go (free again) that many frames after their last return; 0 keeps them."""
     person = (2.43, 1.33, 2.83, 1.73, 1.8)
-    on = dataclasses.replace(CFG, transient_frames=20)
+    on = dataclasses.replace(CFG, transient_frames=20, transient_cut_m=0.0)     # the plain rule
     for cfg, frames, want in ((CFG, 40, CellState.OCCUPIED), (on, 15, CellState.OCCUPIED), (on, 25, CellState.FREE)):
         g = _stood_then_left_behind(cfg, person, frames)
         ij = tuple(g.world_to_cell(np.array([2.45, 1.5])))
@@ -163,7 +163,7 @@ def test_a_person_who_stood_where_the_floor_was_seen_free_is_let_go_after_transi
 
 
 def test_what_is_not_a_standing_person_on_seen_floor_is_never_let_go():
-    on = dataclasses.replace(CFG, transient_frames=20)
+    on = dataclasses.replace(CFG, transient_frames=20, transient_cut_m=0.0)     # the plain rule
     # still in view: each frame returns from it, so it never goes quiet
     g = _stood_then_left_behind(on, (2.43, 1.33, 2.83, 1.73, 1.8), 40, seen_meanwhile=True)
     assert g.states(on)[tuple(g.world_to_cell(np.array([2.45, 1.5])))] == CellState.OCCUPIED
@@ -260,7 +260,7 @@ def test_joining_pieces_looks_only_near_each_piece_and_agrees_with_the_whole_gri
 def test_transient_cut_m_keeps_a_person_who_stood_in_the_open():
     """With transient_cut_m a let-go needs a join: the person in the open room is kept, at 0 let go."""
     person = (2.43, 1.33, 2.83, 1.73, 1.8)
-    plain = dataclasses.replace(CFG, transient_frames=20)
+    plain = dataclasses.replace(CFG, transient_frames=20, transient_cut_m=0.0)
     cut = dataclasses.replace(plain, transient_cut_m=0.22)
     for cfg, want in ((plain, CellState.FREE), (cut, CellState.OCCUPIED)):
         g = _stood_then_left_behind(cfg, person, 25)
