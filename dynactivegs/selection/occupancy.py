@@ -519,6 +519,14 @@ def let_go(grid: OccupancyGrid, cfg: OccupancyConfig, logodds: np.ndarray, top: 
     return OccupancyGrid(grid.origin_ij, grid.cell_m, logodds, top, freed, quiet)
 
 
+_EIGHT = np.ones((3, 3), np.bool_)                 # 8-connected pieces
+
+
+def _around(sl: tuple[slice, slice], pad: int, shape: tuple[int, int]) -> tuple[slice, slice]:
+    """The bounding box ``sl`` (``ndimage.find_objects``) grown by ``pad`` cells each way, clipped to ``shape``."""
+    return tuple(slice(max(s.start - pad, 0), min(s.stop + pad, m)) for s, m in zip(sl, shape))
+
+
 def _clear_disc(cfg: OccupancyConfig, cell_m: float) -> np.ndarray:
     """bool (2r+1, 2r+1): the cells within ``transient_clear_m`` of a centre cell (r in cells, rounded)."""
     r = int(round(cfg.transient_clear_m / cell_m))
@@ -532,9 +540,8 @@ def shut_pieces(logodds: np.ndarray, top: np.ndarray, freed: np.ndarray, quiet: 
     cells not believed free, each with an obstacle return (``top`` > 0) but none for ``transient_frames``
     frames, every cell ``freed``, of at most ``transient_piece_m2``, and with at least ``transient_ring_free`` of
     the cells within ``transient_clear_m`` round the piece believed free."""
-    eight = np.ones((3, 3), np.bool_)
     cand = (logodds > np.float32(cfg.free_below)) & (quiet >= cfg.transient_frames) & (top > 0.0)
-    pieces, n = ndimage.label(cand, structure=eight)
+    pieces, n = ndimage.label(cand, structure=_EIGHT)
     if n == 0:
         return cand
     flat = pieces.ravel()
@@ -545,15 +552,13 @@ def shut_pieces(logodds: np.ndarray, top: np.ndarray, freed: np.ndarray, quiet: 
     disc = _clear_disc(cfg, cell_m)
     r = disc.shape[0] // 2
     free = logodds < np.float32(cfg.free_below)
-    h, w = cand.shape
     for k, sl in enumerate(ndimage.find_objects(pieces), start=1):
         if not ok[k]:
             continue
-        rows = slice(max(sl[0].start - r, 0), min(sl[0].stop + r, h))
-        cols = slice(max(sl[1].start - r, 0), min(sl[1].stop + r, w))
-        piece = pieces[rows, cols] == k
+        box = _around(sl, r, cand.shape)
+        piece = pieces[box] == k
         ring = ndimage.binary_dilation(piece, structure=disc) & ~piece
-        ok[k] = ring.any() and free[rows, cols][ring].mean() >= cfg.transient_ring_free
+        ok[k] = ring.any() and free[box][ring].mean() >= cfg.transient_ring_free
     return ok[pieces]
 
 
@@ -563,30 +568,26 @@ def joining_pieces(cells: np.ndarray, free: np.ndarray, cell_m: float, radius_m:
     floor that a disc of ``radius_m`` can travel (:func:`~dynactivegs.selection.voronoi.traversable_mask`) and that
     is apart now: some 8-connected blob of the floor that becomes passable touches two or more 8-connected pieces
     of the floor passable now, each of at least ``min_piece_m2``."""
-    eight = np.ones((3, 3), np.bool_)
     now = traversable_mask(free, cell_m, radius_m)
-    now_lab, n_now = ndimage.label(now, structure=eight)
+    now_lab, n_now = ndimage.label(now, structure=_EIGHT)
     if min_piece_m2 > 0.0 and n_now:
         area = np.bincount(now_lab.ravel(), minlength=n_now + 1) * cell_m ** 2
         now_lab = np.where(area[now_lab] >= min_piece_m2, now_lab, 0)
-    pieces, n = ndimage.label(cells, structure=eight)
+    pieces, n = ndimage.label(cells, structure=_EIGHT)
     keep = np.zeros(n + 1, np.bool_)
     pad = int(np.ceil(radius_m / cell_m)) + 1          # a piece changes the disc's floor within radius_m of it only
-    h, w = cells.shape
     for k, sl in enumerate(ndimage.find_objects(pieces), start=1):
         # the window holds every cell within 2 pads of the piece; the inner part's clearance test sees the
         # whole grid's obstacles (those within a pad), so the floor gained there is the whole grid's
-        win = tuple(slice(max(s.start - 2 * pad, 0), min(s.stop + 2 * pad, m)) for s, m in zip(sl, (h, w)))
-        inner = tuple(slice(max(s.start - pad, 0) - ws.start, min(s.stop + pad, m) - ws.start)
-                      for s, ws, m in zip(sl, win, (h, w)))
+        win = _around(sl, 2 * pad, cells.shape)
+        inner = tuple(slice(s.start - ws.start, s.stop - ws.start) for s, ws in zip(_around(sl, pad, cells.shape), win))
         gained = (traversable_mask(free[win] | (pieces[win] == k), cell_m, radius_m) & ~now[win])[inner]
         lab_w = now_lab[win][inner]
-        blobs, _ = ndimage.label(gained, structure=eight)
+        blobs, _ = ndimage.label(gained, structure=_EIGHT)
         for b, bs in enumerate(ndimage.find_objects(blobs), start=1):
-            rows = slice(max(bs[0].start - 1, 0), bs[0].stop + 1)
-            cols = slice(max(bs[1].start - 1, 0), bs[1].stop + 1)
-            ring = ndimage.binary_dilation(blobs[rows, cols] == b, structure=eight)
-            touched = np.unique(lab_w[rows, cols][ring])
+            box = _around(bs, 1, gained.shape)
+            ring = ndimage.binary_dilation(blobs[box] == b, structure=_EIGHT)
+            touched = np.unique(lab_w[box][ring])
             if np.count_nonzero(touched) >= 2:
                 keep[k] = True
                 break
