@@ -933,3 +933,73 @@ def test_bench_occupancy_rules_times_three_grids_on_a_log(finished):
     for r in out.values():
         assert r["frames"] == 5 and r["let_go"] == 0 and 0.0 < r["median_ms"] <= r["max_ms"]
     assert all(r["frames"] == 2 for r in mod.time_rules(logs[1], 3, 50)[1].values())
+
+
+def test_room_gain_splits_a_room_into_its_walls_band_and_interior():
+    """benchmarks/room_gain.py's voxel split on a constructed grid: a 2 x 3 m room, 0.1 m voxels; the band is
+    every room voxel within 0.3 m of an inner wall face, each given to its nearest wall, the rest interior, all
+    0.1 m over the floor to 0.3 m under the walls' top."""
+    from dynactivegs.records import FieldsOut
+    from dynactivegs.sim.procedural import WALL_T_M, Room
+
+    mod = _benchmark_module("room_gain")
+    shape, origin = (30, 40, 30), np.array([-0.503, -0.517, 0.0])     # no centre on a face or a diagonal
+    z = np.zeros(shape, np.float32)
+    f = FieldsOut(origin, 0.1, z, z, z, np.zeros(shape, np.bool_))
+    band, interior, side = mod.voxel_masks(f, Room("r", "bedroom", 0.0, 0.0, 2.0, 3.0), 2.7, 0.3)
+    x, y, h = (origin[i] + (np.arange(n) + 0.5) * 0.1 for i, n in enumerate(shape))
+    X, Y, H = np.meshgrid(x, y, h, indexing="ij")
+    half = WALL_T_M / 2
+    gaps = np.stack([Y - half, 3.0 - half - Y, X - half, 2.0 - half - X])          # south, north, west, east
+    in_room = (gaps > 0).all(axis=0) & (H > 0.1) & (H < 2.4)
+    assert not (band & interior).any() and np.array_equal(band | interior, in_room)
+    assert np.array_equal(interior, in_room & (gaps > 0.3).all(axis=0)) and interior.sum() > 0
+    nearest = np.take_along_axis(gaps, side[None].astype(np.int64), axis=0)[0]
+    assert np.all(nearest[band] <= 0.3) and np.array_equal(nearest[band], gaps.min(axis=0)[band])
+    assert all((band & (side == k)).sum() > 0 for k in range(4))
+
+
+def test_room_gain_reads_the_fields_and_candidates_of_a_log(finished, capsys):
+    """benchmarks/room_gain.py on the sweep's full run: the shares and sums are those of the logged /fields grid,
+    the gains those of the latest logged scoring, every target lies in tiny-00's one room; bad input is one line."""
+    from replay.source import LogReader
+
+    out, logs = _sweep_logs(finished)
+    mod = _benchmark_module("room_gain")
+    label, rows, targets = mod.room_gains(logs[1], [5, 2])
+    assert label == "full tiny-00 seed 0" and [r.step for r in rows] == [2, 5] and rows[0].room == "kitchen-0"
+    fields, sels, new_targets = {}, {}, 0
+    for st in LogReader(logs[1]).steps():
+        fields[st.step] = st["/fields"]
+        s = st.get("/selection")
+        if s is not None and len(s.cand_node):
+            sels[st.step] = s
+            new_targets += int(s.target_node >= 0 and s.target_reason != "keep")
+    assert targets == {"kitchen-0": new_targets} and new_targets > 0
+    from dynactivegs.sim.scenes import load_scene
+    from psnr_breakdown import logged_config
+
+    cfg = logged_config(LogReader(logs[1]), logs[1])
+    room = load_scene(cfg.sim).rooms[0]
+    for r in rows:
+        f = fields[r.step]
+        band, interior, _ = mod.voxel_masks(f, room, load_scene(cfg.sim).wall_height_m, 0.3)
+        assert r.interior_seen_pct == pytest.approx(100.0 * (f.n_obs[interior] > 0).mean())
+        assert r.band_us == pytest.approx(float(f.u_s[band].sum()) * f.voxel_m ** 3)
+        at = max(k for k in sels if k <= r.step)
+        assert r.selection_step == at and r.best_gain_any == float(sels[at].cand_gain.max())
+        assert r.best_gain_room <= r.best_gain_any and r.nodes == len(sels[at].node_xy_m)   # one room holds all
+    sides = [v for v in rows[1].side_seen_pct if np.isfinite(v)]        # nan: none of the wall's band in the grid
+    assert sides and 0.0 <= min(sides) and max(sides) <= 100.0
+    assert mod.main([str(logs[1]), "--steps", "5"]) == 0
+    printed = capsys.readouterr().out.splitlines()
+    assert printed[2].startswith("| full tiny-00 seed 0 | 5 | kitchen-0 |") and printed[-1].endswith(
+        f"| kitchen-0 {new_targets} |")
+    with pytest.raises(SystemExit, match="no room 'bathroom-9' in tiny-00: use one of kitchen-0"):
+        mod.main([str(logs[1]), "--room", "bathroom-9"])
+    with pytest.raises(SystemExit, match="bad --steps"):
+        mod.main([str(logs[1]), "--steps", "5,x"])
+    with pytest.raises(SystemExit, match="bad --band"):
+        mod.main([str(logs[1]), "--band", "0"])
+    with pytest.raises(SystemExit, match="error: .*missing.mcap"):
+        mod.main([str(out / "missing.mcap")])
