@@ -106,12 +106,12 @@ def room_gains(mcap: Path, steps: list[int], room_name: str | None = None,
         if st.step > wanted[-1]:
             break
         sel = st.get("/selection")
+        if sel is not None and sel.target_node >= 0 and sel.target_reason != "keep":      # a new target
+            xy = sel.node_xy_m[sel.target_node][None]
+            for r in rooms:
+                targets[r.name] += int(in_room(r, xy)[0])
         if sel is not None and len(sel.cand_node):
             last_sel, last_sel_step = sel, st.step
-            if sel.target_node >= 0 and sel.target_reason != "keep":
-                xy = sel.node_xy_m[sel.target_node][None]
-                for r in rooms:
-                    targets[r.name] += int(in_room(r, xy)[0])
         if st.step not in wanted:
             continue
         f = st.get("/fields")
@@ -133,6 +133,9 @@ def room_gains(mcap: Path, steps: list[int], room_name: str | None = None,
             sides = tuple(pct(band & (side == k)) for k in range(4))
             out.append(RoomAt(st.step, r.name, pct(interior), pct(band), sides, float(f.u_s[interior].sum()) * vol,
                               float(f.u_s[band].sum()) * vol, g_room, g_any, nodes, last_sel_step))
+    missing = sorted(set(wanted) - {r.step for r in out})
+    if missing:
+        raise DagsError(f"{mcap}: the log holds no step {missing[0]}; ask for steps the run took (--steps)")
     label = f"{reader.metadata.get('preset', '?')} {cfg.sim.scene} seed {cfg.seed}"
     return label, out, targets
 

@@ -972,9 +972,9 @@ def test_room_gain_reads_the_fields_and_candidates_of_a_log(finished, capsys):
     for st in LogReader(logs[1]).steps():
         fields[st.step] = st["/fields"]
         s = st.get("/selection")
+        new_targets += int(s is not None and s.target_node >= 0 and s.target_reason != "keep")
         if s is not None and len(s.cand_node):
             sels[st.step] = s
-            new_targets += int(s.target_node >= 0 and s.target_reason != "keep")
     assert targets == {"kitchen-0": new_targets} and new_targets > 0
     from dynactivegs.sim.scenes import load_scene
     from psnr_breakdown import logged_config
@@ -999,6 +999,8 @@ def test_room_gain_reads_the_fields_and_candidates_of_a_log(finished, capsys):
         mod.main([str(logs[1]), "--room", "bathroom-9"])
     with pytest.raises(SystemExit, match="bad --steps"):
         mod.main([str(logs[1]), "--steps", "5,x"])
+    with pytest.raises(SystemExit, match="the log holds no step 6; ask for steps the run took"):
+        mod.main([str(logs[1]), "--steps", "2,6"])                     # the run took steps 0-5
     with pytest.raises(SystemExit, match="bad --band"):
         mod.main([str(logs[1]), "--band", "0"])
     with pytest.raises(SystemExit, match="error: .*missing.mcap"):
