@@ -61,8 +61,7 @@ def voxel_masks(fields, room, wall_height_m: float, band_m: float) -> tuple[np.n
     from dynactivegs.sim.procedural import WALL_T_M
 
     x0, y0, x1, y1 = room.inner(WALL_T_M / 2)
-    ax = [fields.origin_m[i] + (np.arange(n) + 0.5) * fields.voxel_m for i, n in enumerate(fields.u_s.shape)]
-    x, y, z = ax
+    x, y, z = (fields.origin_m[i] + (np.arange(n) + 0.5) * fields.voxel_m for i, n in enumerate(fields.u_s.shape))
     inside_x, inside_y = (x > x0) & (x < x1), (y > y0) & (y < y1)
     deep_x, deep_y = (x > x0 + band_m) & (x < x1 - band_m), (y > y0 + band_m) & (y < y1 - band_m)
     zs = (z > FLOOR_GAP_M) & (z < wall_height_m - TOP_GAP_M)
@@ -119,6 +118,7 @@ def room_gains(mcap: Path, steps: list[int], room_name: str | None = None,
             raise DagsError(f"{mcap}: step {st.step} has no /fields record; pass a log written with the fields "
                             "stage on")
         vol = f.voxel_m ** 3
+        pct = (lambda m: 100.0 * float((f.n_obs[m] > 0).mean()) if m.any() else float("nan"))   # % with n_t > 0
         for r in rooms:
             band, interior, side = voxel_masks(f, r, scene.wall_height_m, band_m)
             g_room = g_any = float("nan")
@@ -129,7 +129,6 @@ def room_gains(mcap: Path, steps: list[int], room_name: str | None = None,
                 cand_in = node_in[last_sel.cand_node]
                 g_any = float(last_sel.cand_gain.max())
                 g_room = float(last_sel.cand_gain[cand_in].max()) if cand_in.any() else float("nan")
-            pct = (lambda m: 100.0 * float((f.n_obs[m] > 0).mean()) if m.any() else float("nan"))
             sides = tuple(pct(band & (side == k)) for k in range(4))
             out.append(RoomAt(st.step, r.name, pct(interior), pct(band), sides, float(f.u_s[interior].sum()) * vol,
                               float(f.u_s[band].sum()) * vol, g_room, g_any, nodes, last_sel_step))

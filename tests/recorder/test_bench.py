@@ -980,10 +980,10 @@ def test_room_gain_reads_the_fields_and_candidates_of_a_log(finished, capsys):
     from psnr_breakdown import logged_config
 
     cfg = logged_config(LogReader(logs[1]), logs[1])
-    room = load_scene(cfg.sim).rooms[0]
+    scene = load_scene(cfg.sim)
     for r in rows:
         f = fields[r.step]
-        band, interior, _ = mod.voxel_masks(f, room, load_scene(cfg.sim).wall_height_m, 0.3)
+        band, interior, _ = mod.voxel_masks(f, scene.rooms[0], scene.wall_height_m, 0.3)
         assert r.interior_seen_pct == pytest.approx(100.0 * (f.n_obs[interior] > 0).mean())
         assert r.band_us == pytest.approx(float(f.u_s[band].sum()) * f.voxel_m ** 3)
         at = max(k for k in sels if k <= r.step)
