@@ -11,11 +11,14 @@ grid of that step (the voxel query set Omega, eq. (4)'s n_t and U_s):
   of a wall's band yet) and their summed U_s x voxel volume (eq. (8)'s units), and
 - from the latest ``/selection`` scoring at or before the step: the best candidate view's I_s (eq. (8)) at a graph
   node inside the room and anywhere, and the room's node count;
-- last, per room, how many of the run's new targets up to the last step asked for lay inside it.
+- last, per room, how many of the run's new targets up to the last step asked for lay inside it, the first step
+  the robot stood in it (its centre ``ENTER_DEPTH_M`` inside the walls; "-" never), and at the last step asked for
+  the band's share on the walls that hold a door (``scene.doors``) and on the others.
 
 A look through a door observes a room's volume but not the inner faces of the wall the door is in: this tells a
-room whose volume was seen that way (interior share high, walls' band low) from one the robot entered. Open loop,
-read from the log only.
+room whose volume was seen that way (interior share high, the door walls' band low) from one the robot entered.
+Over several logs it counts the rooms **seen through their door only**: at least ``SEEN_PCT`` % of the interior
+observed by the last step asked for, never entered. Open loop, read from the log only.
 """
 
 from __future__ import annotations
@@ -36,6 +39,10 @@ FLOOR_GAP_M = 0.1
 """Voxels lower than this over the floor are left out (the floor's own layer)."""
 TOP_GAP_M = 0.3
 """... and voxels higher than this under the walls' top (the ceiling's)."""
+ENTER_DEPTH_M = 0.3
+"""The robot entered a room when its centre stood this far inside the room's wall lines."""
+SEEN_PCT = 50.0
+"""A room counts as seen (for the count of rooms seen through their door only) from this share of its interior."""
 
 
 @dataclass
@@ -53,6 +60,16 @@ class RoomAt:
     best_gain_any: float
     nodes: int
     selection_step: int           # the step of the scoring the gains are from; -1: none yet
+    door_band_seen_pct: float     # the band's share on the walls that hold a door (nan: none in the grid yet)
+    other_band_seen_pct: float    # ... on the other walls
+
+
+@dataclass
+class RoomRun:
+    """One room over a run up to the last step asked for (module docstring)."""
+
+    targets: int = 0              # new targets inside
+    entered_step: int = -1        # first step the robot stood inside; -1 never
 
 
 def voxel_masks(fields, room, wall_height_m: float, band_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -74,15 +91,10 @@ def voxel_masks(fields, room, wall_height_m: float, band_m: float) -> tuple[np.n
     return band, interior, side
 
 
-def in_room(room, xy: np.ndarray) -> np.ndarray:
-    """bool (N,): the points (N, 2) inside the room's rectangle."""
-    return (xy[:, 0] >= room.x0) & (xy[:, 0] <= room.x1) & (xy[:, 1] >= room.y0) & (xy[:, 1] <= room.y1)
-
-
 def room_gains(mcap: Path, steps: list[int], room_name: str | None = None,
-               band_m: float = 0.3) -> tuple[str, list[RoomAt], dict[str, int]]:
-    """(a label, a :class:`RoomAt` per asked step (in order) and room, {room: new targets inside up to the last
-    asked step}) for the run logged in ``mcap``."""
+               band_m: float = 0.3) -> tuple[str, list[RoomAt], dict[str, RoomRun]]:
+    """(a label, a :class:`RoomAt` per asked step (in order) and room, {room: its :class:`RoomRun`}) for the run
+    logged in ``mcap``."""
     from dynactivegs.errors import DagsError
     from dynactivegs.sim.scenes import is_procedural_name, load_scene
     from replay.source import LogReader
@@ -99,16 +111,22 @@ def room_gains(mcap: Path, steps: list[int], room_name: str | None = None,
                         f"{', '.join(r.name for r in scene.rooms)}")
     wanted = sorted(set(steps))
     out: list[RoomAt] = []
-    targets = dict.fromkeys((r.name for r in rooms), 0)
+    runs = {r.name: RoomRun() for r in rooms}
+    doors = [r.door_sides(scene.doors, scene.rooms) for r in rooms]
     last_sel, last_sel_step = None, -1
     for st in reader.steps():
         if st.step > wanted[-1]:
             break
+        robot = st["/truth"].robot
+        for r in rooms:
+            x0, y0, x1, y1 = r.inner(ENTER_DEPTH_M)
+            if runs[r.name].entered_step < 0 and x0 < robot.x_m < x1 and y0 < robot.y_m < y1:
+                runs[r.name].entered_step = st.step
         sel = st.get("/selection")
         if sel is not None and sel.target_node >= 0 and sel.target_reason != "keep":      # a new target
             xy = sel.node_xy_m[sel.target_node][None]
             for r in rooms:
-                targets[r.name] += int(in_room(r, xy)[0])
+                runs[r.name].targets += int(r.contains(xy)[0])
         if sel is not None and len(sel.cand_node):
             last_sel, last_sel_step = sel, st.step
         if st.step not in wanted:
@@ -119,24 +137,26 @@ def room_gains(mcap: Path, steps: list[int], room_name: str | None = None,
                             "stage on")
         vol = f.voxel_m ** 3
         pct = (lambda m: 100.0 * float((f.n_obs[m] > 0).mean()) if m.any() else float("nan"))   # % with n_t > 0
-        for r in rooms:
+        for r, door in zip(rooms, doors):
             band, interior, side = voxel_masks(f, r, scene.wall_height_m, band_m)
+            on_door = np.isin(side, list(door))
             g_room = g_any = float("nan")
             nodes = 0
             if last_sel is not None:
-                node_in = in_room(r, last_sel.node_xy_m)
+                node_in = r.contains(last_sel.node_xy_m)
                 nodes = int(node_in.sum())
                 cand_in = node_in[last_sel.cand_node]
                 g_any = float(last_sel.cand_gain.max())
                 g_room = float(last_sel.cand_gain[cand_in].max()) if cand_in.any() else float("nan")
             sides = tuple(pct(band & (side == k)) for k in range(4))
             out.append(RoomAt(st.step, r.name, pct(interior), pct(band), sides, float(f.u_s[interior].sum()) * vol,
-                              float(f.u_s[band].sum()) * vol, g_room, g_any, nodes, last_sel_step))
+                              float(f.u_s[band].sum()) * vol, g_room, g_any, nodes, last_sel_step,
+                              pct(band & on_door), pct(band & ~on_door)))
     missing = sorted(set(wanted) - {r.step for r in out})
     if missing:
         raise DagsError(f"{mcap}: the log holds no step {missing[0]}; ask for steps the run took (--steps)")
     label = f"{reader.metadata.get('preset', '?')} {cfg.sim.scene} seed {cfg.seed}"
-    return label, out, targets
+    return label, out, runs
 
 
 def _steps(text: str) -> list[int]:
@@ -163,21 +183,38 @@ def main(argv: list[str] | None = None) -> int:
 
     print("| run | step | room | interior seen % | walls' band seen %: all (S / N / W / E) | U_s m^3: interior / band "
           "| best I_s: room / anywhere (scored at step) | nodes in room |\n" + "|---" * 8 + "|", flush=True)
-    totals = []
+    fmt = (lambda v: f"{v:.0f}" if np.isfinite(v) else "-")           # "-": none of it in the grid yet
+    last = max(steps)
+    summary = []                  # (label, room, RoomRun, its RoomAt at the last step)
     for path in args.mcap:
         try:
-            label, rows, targets = room_gains(path, steps, args.room, args.band)
+            label, rows, runs = room_gains(path, steps, args.room, args.band)
         except (DagsError, ValueError) as e:
             sys.exit(f"error: {e}")
         for r in rows:
-            sides = " / ".join(f"{v:.0f}" if np.isfinite(v) else "-" for v in r.side_seen_pct)
+            sides = " / ".join(fmt(v) for v in r.side_seen_pct)
             print(f"| {label} | {r.step} | {r.room} | {r.interior_seen_pct:.0f} | {r.band_seen_pct:.0f} ({sides}) | "
                   f"{r.interior_us:.2f} / {r.band_us:.2f} | {r.best_gain_room:.1f} / {r.best_gain_any:.1f} "
                   f"({r.selection_step}) | {r.nodes} |", flush=True)
-        totals.append((label, targets))
-    print(f"\n| run | new targets inside each room up to step {max(steps)} |\n|---|---|")
-    for label, targets in totals:
-        print(f"| {label} | {', '.join(f'{k} {v}' for k, v in targets.items())} |")
+        summary += [(label, r.room, runs[r.room], r) for r in rows if r.step == last]
+    print(f"\n| run | room | entered at step | new targets inside | at step {last}: interior seen % | walls' band "
+          "seen %: door walls / others |\n" + "|---" * 6 + "|")
+    for label, room, run, r in summary:
+        entered = str(run.entered_step) if run.entered_step >= 0 else "-"
+        print(f"| {label} | {room} | {entered} | {run.targets} | {fmt(r.interior_seen_pct)} | "
+              f"{fmt(r.door_band_seen_pct)} / {fmt(r.other_band_seen_pct)} |")
+    through = [(label, room, r) for label, room, run, r in summary
+               if run.entered_step < 0 and r.interior_seen_pct >= SEEN_PCT]
+    door_seen = [r.door_band_seen_pct for _, _, run, r in summary
+                 if run.entered_step >= 0 and np.isfinite(r.door_band_seen_pct)]
+    print(f"\nseen through their door only (interior >= {SEEN_PCT:.0f} % seen by step {last}, never entered): "
+          f"{len(through)} of {len(summary)} rooms in {len(args.mcap)} runs")
+    for label, room, r in through:
+        print(f"- {label} {room}: interior {r.interior_seen_pct:.0f} %, walls' band door walls "
+              f"{fmt(r.door_band_seen_pct)} / others {fmt(r.other_band_seen_pct)} %")
+    if door_seen:
+        print(f"the entered rooms' door walls' band: {np.mean(door_seen):.0f} % seen on average ({len(door_seen)} "
+              "rooms with a door)")
     return 0
 
 

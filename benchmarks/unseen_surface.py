@@ -73,8 +73,7 @@ def room_losses(run: dict[str, Any], top: int = 3) -> list[tuple[str, float]]:
     xy = o.points_m[:, :2] + ROOM_STEP_M * o.normals[:, :2]
     out = []
     for r in rooms:
-        inside = (xy[:, 0] >= r.x0) & (xy[:, 0] <= r.x1) & (xy[:, 1] >= r.y0) & (xy[:, 1] <= r.y1)
-        out.append((r.name, 100.0 * float(lost[inside].sum()) / float(w.sum())))
+        out.append((r.name, 100.0 * float(lost[r.contains(xy)].sum()) / float(w.sum())))
     return sorted(out, key=lambda t: -t[1])[:top]
 
 

@@ -65,6 +65,22 @@ class Room:
     def inner(self, margin: float = WALL_T_M / 2) -> tuple[float, float, float, float]:
         return self.x0 + margin, self.y0 + margin, self.x1 - margin, self.y1 - margin
 
+    def contains(self, xy: np.ndarray) -> np.ndarray:
+        """bool (N,): the points (N, 2) inside the rectangle, its edges included."""
+        return (xy[:, 0] >= self.x0) & (xy[:, 0] <= self.x1) & (xy[:, 1] >= self.y0) & (xy[:, 1] <= self.y1)
+
+    def door_sides(self, doors, rooms) -> frozenset[int]:
+        """The walls of this room that hold one of ``doors`` (``Door`` s indexing ``rooms``): 0 south, 1 north,
+        2 west, 3 east."""
+        sides = set()
+        for d in doors:
+            if self not in (rooms[d.rooms[0]], rooms[d.rooms[1]]):
+                continue
+            lo, hi = (self.x0, self.x1) if d.vertical else (self.y0, self.y1)
+            near_hi = abs(d.line_m - hi) < abs(d.line_m - lo)
+            sides.add((2 if d.vertical else 0) + int(near_hi))
+        return frozenset(sides)
+
 
 @dataclass(frozen=True)
 class Door:

@@ -961,26 +961,32 @@ def test_room_gain_splits_a_room_into_its_walls_band_and_interior():
 
 def test_room_gain_reads_the_fields_and_candidates_of_a_log(finished, capsys):
     """benchmarks/room_gain.py on the sweep's full run: the shares and sums are those of the logged /fields grid,
-    the gains those of the latest logged scoring, every target lies in tiny-00's one room; bad input is one line."""
+    the gains those of the latest logged scoring, every target lies in tiny-00's one room, entered where the
+    logged robot first stands 0.3 m inside its walls; the room has no door, so its whole band is "other walls" and
+    it is not counted as seen through its door; bad input is one line."""
     from replay.source import LogReader
 
     out, logs = _sweep_logs(finished)
     mod = _benchmark_module("room_gain")
-    label, rows, targets = mod.room_gains(logs[1], [5, 2])
+    label, rows, runs = mod.room_gains(logs[1], [5, 2])
     assert label == "full tiny-00 seed 0" and [r.step for r in rows] == [2, 5] and rows[0].room == "kitchen-0"
-    fields, sels, new_targets = {}, {}, 0
+    fields, sels, new_targets, robot = {}, {}, 0, []
     for st in LogReader(logs[1]).steps():
         fields[st.step] = st["/fields"]
+        robot.append((st["/truth"].robot.x_m, st["/truth"].robot.y_m))
         s = st.get("/selection")
         new_targets += int(s is not None and s.target_node >= 0 and s.target_reason != "keep")
         if s is not None and len(s.cand_node):
             sels[st.step] = s
-    assert targets == {"kitchen-0": new_targets} and new_targets > 0
     from dynactivegs.sim.scenes import load_scene
     from psnr_breakdown import logged_config
 
     cfg = logged_config(LogReader(logs[1]), logs[1])
     scene = load_scene(cfg.sim)
+    x0, y0, x1, y1 = scene.rooms[0].inner(0.3)
+    inside = [k for k, (x, y) in enumerate(robot) if x0 < x < x1 and y0 < y < y1]
+    assert list(runs) == ["kitchen-0"] and runs["kitchen-0"].targets == new_targets > 0
+    assert runs["kitchen-0"].entered_step == (inside[0] if inside else -1)
     for r in rows:
         f = fields[r.step]
         band, interior, _ = mod.voxel_masks(f, scene.rooms[0], scene.wall_height_m, 0.3)
@@ -989,12 +995,16 @@ def test_room_gain_reads_the_fields_and_candidates_of_a_log(finished, capsys):
         at = max(k for k in sels if k <= r.step)
         assert r.selection_step == at and r.best_gain_any == float(sels[at].cand_gain.max())
         assert r.best_gain_room <= r.best_gain_any and r.nodes == len(sels[at].node_xy_m)   # one room holds all
+        assert np.isnan(r.door_band_seen_pct) and r.other_band_seen_pct == r.band_seen_pct
     sides = [v for v in rows[1].side_seen_pct if np.isfinite(v)]        # nan: none of the wall's band in the grid
     assert sides and 0.0 <= min(sides) and max(sides) <= 100.0
     assert mod.main([str(logs[1]), "--steps", "5"]) == 0
     printed = capsys.readouterr().out.splitlines()
-    assert printed[2].startswith("| full tiny-00 seed 0 | 5 | kitchen-0 |") and printed[-1].endswith(
-        f"| kitchen-0 {new_targets} |")
+    assert printed[2].startswith("| full tiny-00 seed 0 | 5 | kitchen-0 |")
+    entered = str(runs["kitchen-0"].entered_step) if inside else "-"
+    assert any(line.startswith(f"| full tiny-00 seed 0 | kitchen-0 | {entered} | {new_targets} | ") for line in printed)
+    assert any(line.startswith("seen through their door only") and line.endswith(": 0 of 1 rooms in 1 runs")
+               for line in printed)
     with pytest.raises(SystemExit, match="no room 'bathroom-9' in tiny-00: use one of kitchen-0"):
         mod.main([str(logs[1]), "--room", "bathroom-9"])
     with pytest.raises(SystemExit, match="bad --steps"):

@@ -73,6 +73,27 @@ def test_loop_scenes_are_the_apartments_with_ways_round():
     assert sum(lb for _, lb in loops) >= 2 * sum(la for la, _ in loops) + 8, loops
 
 
+def test_room_contains_and_door_sides():
+    """Room.contains tests the rectangle, edges included; Room.door_sides names the walls its doors are in, on
+    constructed rooms (a vertical door between two rooms side by side, a horizontal one to a room north of the
+    first) and on every room of the standard apartments (each has a door, as many sides as it has doors at most)."""
+    from dynactivegs.sim.procedural import Door, Room
+
+    rooms = (Room("a", "living", 0.0, 0.0, 4.0, 3.0), Room("b", "kitchen", 4.0, 0.0, 7.0, 3.0),
+             Room("c", "bedroom", 0.0, 3.0, 4.0, 6.0))
+    doors = (Door((0, 1), True, 4.0, 1.5, 0.9), Door((0, 2), False, 3.0, 2.0, 0.9))
+    assert rooms[0].door_sides(doors, rooms) == {1, 3}                  # north and east
+    assert rooms[1].door_sides(doors, rooms) == {2} and rooms[2].door_sides(doors, rooms) == {0}
+    assert rooms[1].door_sides(doors[1:], rooms) == frozenset()
+    xy = np.array([[0.0, 0.0], [4.0, 3.0], [2.0, 1.5], [4.01, 1.0], [1.0, -0.01]])
+    assert rooms[0].contains(xy).tolist() == [True, True, True, False, False]
+    for i in range(4):
+        scene = make_scene(f"apartment-{i:02d}")
+        for k, r in enumerate(scene.rooms):
+            sides = r.door_sides(scene.doors, scene.rooms)
+            assert 1 <= len(sides) <= sum(k in d.rooms for d in scene.doors)
+
+
 def test_surfaces_are_textured_not_flat():
     s = make_scene("apartment-00")
     tex = s.parts[0].appearance.textures
