@@ -165,7 +165,11 @@ class SelectionConfig:
     scenes x seeds 0-1, one machine, benchmarks/results/apartment-1000-selvariants/full_boundary_gain; Acc cm /
     C.R. % / PSNR dB, mean of 8): 2.65 / 91.7 / 23.86 against full's 3.11 / 91.4 / 23.83; Obs. views 95.3 %
     against 92.8, so its paths showed the camera more of what the held-out views see, but PSNR did not follow;
-    full beat baseline on all three in 5 of the 8 pairs against 7. Off by default."""
+    full beat baseline on all three in 5 of the 8 pairs against 7. At today's defaults (the cut rule), 12 pairs
+    on a third machine (benchmarks/results/apartment-1000-machine3-boundary): 2.58 / 91.9 / 23.80 against
+    full's 2.45 / 93.3 / 24.00, 2 pairs won against 3; it entered the rooms full had only looked into (PSNR +0.31
+    dB over the 9 pairs off apartment-01) but left whole rooms unseen on apartment-01 (-1.59 to -1.79 dB): a
+    room never looked into gains only its doorway's face. Off by default."""
     subregion_choice: bool = True
     """full: choose the target by the subregion rule (the robot's own subregion while its best view scores above
     local_threshold, else the eq. (10) subregion; cut_hold_local holds it local). False: the best eq. (7) view
