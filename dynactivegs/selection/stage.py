@@ -170,6 +170,13 @@ class SelectionConfig:
     full's 2.45 / 93.3 / 24.00, 2 pairs won against 3; it entered the rooms full had only looked into (PSNR +0.31
     dB over the 9 pairs off apartment-01) but left whole rooms unseen on apartment-01 (-1.59 to -1.79 dB): a
     room never looked into gains only its doorway's face. Off by default."""
+    face_gain_weight: float = 0.0
+    """Scored variants: eq. (8) plus this times boundary_gain's face sum (U_s over the voxels next to the seen
+    free space, divided by the voxel edge): the volume never looked into keeps its depth (what boundary_gain
+    loses: whole rooms on apartment-01) while the faces that bound the seen space, such as a door wall's inner
+    face, gain as boundary_gain makes them (what eq. (8) loses: benchmarks/results/apartment-1000-machine3).
+    At 1 a face voxel counts 1 + 1 / voxel edge (11 at 0.1 m) times a voxel of volume. 0: eq. (8) as it is. Not
+    with boundary_gain, which drops the volume."""
     subregion_choice: bool = True
     """full: choose the target by the subregion rule (the robot's own subregion while its best view scores above
     local_threshold, else the eq. (10) subregion; cut_hold_local holds it local). False: the best eq. (7) view
@@ -369,6 +376,10 @@ class SelectionConfig:
         for name in ("l_r", "l_c", "turn_cost_m", "motion_weight", "l_d", "l_v", "stand_weight"):
             check_config(getattr(self, name) >= 0.0, f"selection.{name}", getattr(self, name), ">= 0")
         check_config(math.isfinite(self.local_threshold), "selection.local_threshold", self.local_threshold, "finite")
+        check_config(math.isfinite(self.face_gain_weight) and self.face_gain_weight >= 0.0, "selection.face_gain_weight",
+                     self.face_gain_weight, ">= 0 (0: off)")
+        check_config(not (self.boundary_gain and self.face_gain_weight > 0.0), "selection.face_gain_weight",
+                     self.face_gain_weight, "0 with selection.boundary_gain on (faces only); turn one off")
         check_config(0.0 <= self.local_share <= 1.0, "selection.local_share", self.local_share, "in [0, 1]")
         check_config(self.visit_radius_m > 0.0, "selection.visit_radius_m", self.visit_radius_m, "> 0 m")
         check_config(self.visit_norm_steps > 0.0, "selection.visit_norm_steps", self.visit_norm_steps, "> 0")
@@ -771,7 +782,8 @@ def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, a
         travel = length_d
     reach = np.isfinite(length_d) & ~banned.all(axis=1)
     nodes = np.nonzero(reach)[0]
-    fa = _fields_arrays(rec.fields, rec, xy_nodes[nodes], cfg.visibility.range_m, with_observed=cfg.boundary_gain)
+    faces = cfg.boundary_gain or cfg.face_gain_weight > 0.0
+    fa = _fields_arrays(rec.fields, rec, xy_nodes[nodes], cfg.visibility.range_m, with_observed=faces)
     ny = cfg.visibility.n_yaws
     if fa is None or len(nodes) == 0:
         gain = np.zeros((len(nodes), ny))
@@ -781,10 +793,12 @@ def _score_views(cfg: SelectionConfig, rec: StepRecord, state_graph: nx.Graph, a
         cells = np.argwhere(grid.occupied(cfg.occupancy))
         occ = occ | column_occluders(grid.cell_to_world(cells), grid.top_m[cells[:, 0], cells[:, 1]].astype(np.float64),
                                      cfg.occupancy.band_hi_m - voxel, origin, voxel, occ.shape)   # walls: top in the band's top voxel
-        if cfg.boundary_gain:
-            # eq. (8) over the voxels next to the known free space only (SelectionConfig.boundary_gain)
+        if faces:
+            # eq. (8) over the voxels next to the known free space (SelectionConfig.boundary_gain), alone or
+            # added to the volume's (SelectionConfig.face_gain_weight)
             free = fa[5] & ~occ                                    # observed, no occluder
-            u_s = np.where(ndimage.binary_dilation(free) & ~free, u_s / voxel, 0.0).astype(np.float32)   # x m^2
+            face_u = np.where(ndimage.binary_dilation(free) & ~free, u_s / voxel, 0.0)          # x m^2
+            u_s = (face_u if cfg.boundary_gain else u_s + cfg.face_gain_weight * face_u).astype(np.float32)
         gs, gm = bin_gains(vis, occ, u_s, u_m, origin, voxel, xy_nodes[nodes])
         gain, risk = view_gains(vis, gs), view_gains(vis, gm)                      # eqs. (8), (9)
     yaws = vis.yaws_rad

@@ -610,6 +610,31 @@ def test_with_boundary_gain_the_faces_around_seen_free_space_outweigh_unknown_vo
     assert 0.0 < boundary.cand_gain[in_l].max() < volume.cand_gain[x_of(volume) < 2.5].max()
 
 
+def test_face_gain_weight_adds_the_faces_to_the_volume_gain():
+    """face_gain_weight w: each view's gain is eq. (8)'s plus w times boundary_gain's (the gain is linear in U_s),
+    so the room never observed keeps its volume and the seen room's wall faces count more; bad values are one
+    line each."""
+    free = three_rooms()                                             # the robot in C
+    fo, mo = fields_for(free, [(0.3, 0.3, 2.7, 2.7, 0.8), (6.5, 0.5, 8.5, 2.5, 1.0)], [])
+    n_obs = np.ones(fo.n_obs.shape, np.float32)
+    fill(n_obs, 6.5, 0.5, 8.5, 2.5, 0.0, VOX, True)
+    fo = dataclasses.replace(fo, n_obs=n_obs)
+
+    def pick(**kw) -> SelectionOut:
+        return select_once(selection.SelectionConfig(variant="static_gain", **kw), free, fo, mo, (4.5, 1.5))
+
+    volume, faces, both = pick(), pick(boundary_gain=True), pick(face_gain_weight=0.5)
+    np.testing.assert_array_equal(both.cand_node, volume.cand_node)
+    np.testing.assert_allclose(both.cand_gain, volume.cand_gain + 0.5 * faces.cand_gain, rtol=1e-4, atol=1e-6)
+    x_of = lambda out: out.node_xy_m[out.cand_node, 0]
+    assert both.cand_gain[x_of(both) > 6.5].max() >= volume.cand_gain[x_of(volume) > 6.5].max()     # R's volume
+    assert both.cand_gain[x_of(both) < 2.5].max() > volume.cand_gain[x_of(volume) < 2.5].max()      # L's faces
+    with pytest.raises(ConfigError, match="selection.face_gain_weight=-1.0: must be >= 0"):
+        selection.SelectionConfig(face_gain_weight=-1.0)
+    with pytest.raises(ConfigError, match="with selection.boundary_gain on"):
+        selection.SelectionConfig(face_gain_weight=1.0, boundary_gain=True)
+
+
 def test_with_stand_weight_views_from_where_the_robot_stood_lose_to_the_same_views_elsewhere():
     free = three_rooms()                                             # the robot in C, facing R
     fo, mo = fields_for(free, [(0.5, 0.5, 2.5, 2.5, 1.0), (6.5, 0.5, 8.5, 2.5, 1.0)], [])   # L and R alike
