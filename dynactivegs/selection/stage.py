@@ -378,8 +378,8 @@ class SelectionConfig:
         for name in ("l_r", "l_c", "turn_cost_m", "motion_weight", "l_d", "l_v", "stand_weight"):
             check_config(getattr(self, name) >= 0.0, f"selection.{name}", getattr(self, name), ">= 0")
         check_config(math.isfinite(self.local_threshold), "selection.local_threshold", self.local_threshold, "finite")
-        check_config(math.isfinite(self.face_gain_weight) and self.face_gain_weight >= 0.0, "selection.face_gain_weight",
-                     self.face_gain_weight, ">= 0 (0: off)")
+        check_config(math.isfinite(self.face_gain_weight) and self.face_gain_weight >= 0.0,
+                     "selection.face_gain_weight", self.face_gain_weight, ">= 0 (0: off)")
         check_config(not (self.boundary_gain and self.face_gain_weight > 0.0), "selection.face_gain_weight",
                      self.face_gain_weight, "0 with selection.boundary_gain on (faces only); turn one off")
         check_config(0.0 <= self.local_share <= 1.0, "selection.local_share", self.local_share, "in [0, 1]")
