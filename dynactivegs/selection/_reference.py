@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from dynactivegs.selection.occupancy import (FrameRays, OccupancyConfig, OccupancyGrid, apply_seen, frame_rays, let_go,
-                                             obstacle_tops)
+                                             obstacle_tops, people_cells)
 
 
 def _overlap(x0: float, y0: float, x1: float, y1: float, j: int, i: int) -> tuple[float, float] | None:
@@ -67,7 +67,8 @@ def update_occupancy_reference(grid: OccupancyGrid, cfg: OccupancyConfig, depth_
     grid, rays = frame_rays(grid, cfg, depth_m, K, T_world_cam, beta)
     top = obstacle_tops(grid.top_m, rays)
     seen_free, seen_occ = seen_masks_reference(grid.shape, rays, top, cfg.clear_below_m)
-    return let_go(grid, cfg, apply_seen(grid.logodds, seen_free, seen_occ, cfg), top, seen_occ)
+    return let_go(grid, cfg, apply_seen(grid.logodds, seen_free, seen_occ, cfg), top, seen_occ,
+                  people_cells(grid.shape, rays))
 
 
 def dyn_distance_terms_reference(G, um_attr: str = "um_mean") -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -162,6 +162,11 @@ class OccupancyConfig:
     """With ``transient_cut_m``, the least share of the cells within ``transient_clear_m`` round a piece that must
     be believed free for it to go (a person stands on open floor; a fragment of a wall has unseen or occupied
     cells round it)."""
+    transient_people_frames: int = 0
+    """With ``transient_cut_m``, a piece goes only where some cell of it or within ``transient_clear_m`` of it held
+    people returns (obstacle-band returns with beta above ``beta_max``: someone seen moving,
+    :attr:`OccupancyGrid.people`) in at least this many frames: a person who walked there and then stood still,
+    not a piece of furniture that was never seen moving. 0: no such test (the default)."""
     transient_cut_min_m2: float = 0.5
     """With ``transient_cut_m``, pieces of the floor a disc can travel smaller than this (m2 of the disc's centre
     positions) do not count as joined: pockets beside furniture. Measured on ``full``, apartment-00 seed 0 (1000
@@ -191,6 +196,8 @@ class OccupancyConfig:
                      self.transient_top_m, "in (occupancy.band_lo_m, occupancy.band_hi_m]")
         check_config(0.0 <= self.transient_cut_m <= 2.0, "occupancy.transient_cut_m", self.transient_cut_m,
                      "in [0, 2] m (0: let every transient piece go)")
+        check_config(self.transient_people_frames >= 0, "occupancy.transient_people_frames",
+                     self.transient_people_frames, ">= 0 (0: no people-return test)")
         check_config(self.transient_cut_min_m2 >= 0.0, "occupancy.transient_cut_min_m2", self.transient_cut_min_m2,
                      ">= 0 m2")
         check_config(self.transient_piece_m2 > 0.0, "occupancy.transient_piece_m2", self.transient_piece_m2, "> 0 m2")
@@ -208,10 +215,11 @@ class OccupancyGrid:
     top_m: np.ndarray | None = None   # float32 (H, W): highest static obstacle return seen in the cell (0: none)
     freed: np.ndarray | None = None   # bool (H, W): the cell was held at logodds_min before any obstacle was seen in it
     quiet: np.ndarray | None = None   # int32 (H, W): frames since the cell last had a static obstacle return
+    people: np.ndarray | None = None  # int32 (H, W): frames in which the cell held a people return (a dynamic one)
 
     def __post_init__(self) -> None:
         assert self.logodds.ndim == 2 and self.logodds.dtype == np.float32
-        for name, dtype in (("top_m", np.float32), ("freed", np.bool_), ("quiet", np.int32)):
+        for name, dtype in (("top_m", np.float32), ("freed", np.bool_), ("quiet", np.int32), ("people", np.int32)):
             if getattr(self, name) is None:
                 object.__setattr__(self, name, np.zeros(self.logodds.shape, dtype))
             a = getattr(self, name)
@@ -304,7 +312,7 @@ class OccupancyGrid:
             n_i1, n_j1 = max(n_i1, i0 + h), max(n_j1, j0 + w)
         old = (slice(i0 - n_i0, i0 - n_i0 + h), slice(j0 - n_j0, j0 - n_j0 + w))
         arrays = []
-        for a in (self.logodds, self.top_m, self.freed, self.quiet):
+        for a in (self.logodds, self.top_m, self.freed, self.quiet, self.people):
             b = np.zeros((n_i1 - n_i0, n_j1 - n_j0), a.dtype)
             if h and w:
                 b[old] = a
@@ -322,6 +330,7 @@ class FrameRays:
     end_z_m: np.ndarray           # float64 (N,) height of the ray at its end (clipped at max_range_m)
     end_free: np.ndarray          # bool (N,) the end cell itself is seen free (floor return)
     end_occupied: np.ndarray      # bool (N,) the end cell is seen occupied (static obstacle return)
+    end_people: np.ndarray        # bool (N,) the end is a people return: in the band, in range, beta above beta_max
 
 
 def backproject(depth_m: np.ndarray, K: np.ndarray, T_world_cam: np.ndarray, stride: int = 1) -> tuple[np.ndarray, np.ndarray]:
@@ -383,11 +392,13 @@ def frame_rays(grid: OccupancyGrid, cfg: OccupancyConfig, depth_m: np.ndarray, K
     end_z = cam_z + (z - cam_z) * scale
     end_free = (z < cfg.band_lo_m) & ~far
     end_occ = band & ~far & ~dynamic
+    end_people = band & ~far & dynamic
     lo = np.minimum(end_xy.min(axis=0), cam_xy) if len(end_xy) else cam_xy
     hi = np.maximum(end_xy.max(axis=0), cam_xy) if len(end_xy) else cam_xy
     grid = grid.grown_to_include(lo, hi, cfg.grow_chunk_m)
     off = np.array([grid.origin_ij[1], grid.origin_ij[0]], np.float64)
-    return grid, FrameRays(cam_xy / grid.cell_m - off, cam_z, end_xy / grid.cell_m - off, end_z, end_free, end_occ)
+    return grid, FrameRays(cam_xy / grid.cell_m - off, cam_z, end_xy / grid.cell_m - off, end_z, end_free, end_occ,
+                           end_people)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -446,10 +457,18 @@ def _trace_free(start_g, start_z, end_g, end_z, end_free, top_m, clear_below, se
         seen_free[ci0, cj0] = True
 
 
-def _occupied_cells(rays: FrameRays) -> tuple[np.ndarray, np.ndarray]:
-    """(rows, cols) int64 of the cells holding the frame's static obstacle returns, in ray order."""
-    e = rays.end_g[rays.end_occupied]
+def _occupied_cells(rays: FrameRays, which: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) int64 of the cells holding the frame's static obstacle returns (or the rays ``which``, bool
+    (N,)), in ray order."""
+    e = rays.end_g[rays.end_occupied if which is None else which]
     return np.floor(e[:, 1]).astype(np.int64), np.floor(e[:, 0]).astype(np.int64)
+
+
+def people_cells(shape: tuple[int, int], rays: FrameRays) -> np.ndarray:
+    """bool (H, W): the cells holding the frame's people returns (:attr:`FrameRays.end_people`)."""
+    seen = np.zeros(shape, np.bool_)
+    seen[_occupied_cells(rays, rays.end_people)] = True     # the grid holds every ray end (frame_rays)
+    return seen
 
 
 def obstacle_tops(top_m: np.ndarray, rays: FrameRays) -> np.ndarray:
@@ -492,19 +511,23 @@ def update_occupancy(grid: OccupancyGrid, cfg: OccupancyConfig, depth_m: np.ndar
     grid, rays = frame_rays(grid, cfg, depth_m, K, T_world_cam, beta, returns)
     top = obstacle_tops(grid.top_m, rays)
     seen_free, seen_occ = seen_masks(grid.shape, rays, top, cfg.clear_below_m)
-    return let_go(grid, cfg, apply_seen(grid.logodds, seen_free, seen_occ, cfg), top, seen_occ)
+    return let_go(grid, cfg, apply_seen(grid.logodds, seen_free, seen_occ, cfg), top, seen_occ,
+                  people_cells(grid.shape, rays))
 
 
 def let_go(grid: OccupancyGrid, cfg: OccupancyConfig, logodds: np.ndarray, top: np.ndarray,
-           seen_occ: np.ndarray) -> OccupancyGrid:
-    """The grid of one frame's update (``logodds`` and ``top`` after it, ``seen_occ`` its occupied cells), with
-    the transient cells that had no static obstacle return for ``transient_frames`` frames made free again
+           seen_occ: np.ndarray, seen_people: np.ndarray | None = None) -> OccupancyGrid:
+    """The grid of one frame's update (``logodds`` and ``top`` after it, ``seen_occ`` its occupied cells,
+    ``seen_people`` its cells with people returns, :func:`people_cells`), with the transient cells that had no
+    static obstacle return for ``transient_frames`` frames made free again
     (:attr:`OccupancyConfig.transient_frames`; nothing changes at 0)."""
     freed = grid.freed | ((logodds <= np.float32(cfg.logodds_min)) & (top <= 0.0))
     quiet = np.where(seen_occ, 0, np.minimum(grid.quiet, np.iinfo(np.int32).max - 1) + 1).astype(np.int32)
+    people = grid.people if seen_people is None else (
+        np.minimum(grid.people, np.iinfo(np.int32).max - 1) + seen_people).astype(np.int32)
     stale = None
     if cfg.transient_frames > 0 and cfg.transient_cut_m > 0.0:               # the cut rule
-        stale = shut_pieces(logodds, top, freed, quiet, grid.cell_m, cfg)
+        stale = shut_pieces(logodds, top, freed, quiet, grid.cell_m, cfg, people)
         if stale.any():
             open_floor = (logodds <= np.float32(cfg.occupied_above)) & ~stale     # free or not seen yet
             stale = joining_pieces(stale, open_floor, grid.cell_m, cfg.transient_cut_m, cfg.transient_cut_min_m2)
@@ -516,7 +539,7 @@ def let_go(grid: OccupancyGrid, cfg: OccupancyConfig, logodds: np.ndarray, top: 
     if stale is not None and stale.any():
         logodds = np.where(stale, np.float32(cfg.free_below + cfg.l_free), logodds).astype(np.float32)
         top = np.where(stale, np.float32(0.0), top).astype(np.float32)
-    return OccupancyGrid(grid.origin_ij, grid.cell_m, logodds, top, freed, quiet)
+    return OccupancyGrid(grid.origin_ij, grid.cell_m, logodds, top, freed, quiet, people)
 
 
 _EIGHT = np.ones((3, 3), np.bool_)                 # 8-connected pieces
@@ -535,11 +558,13 @@ def _clear_disc(cfg: OccupancyConfig, cell_m: float) -> np.ndarray:
 
 
 def shut_pieces(logodds: np.ndarray, top: np.ndarray, freed: np.ndarray, quiet: np.ndarray, cell_m: float,
-                cfg: OccupancyConfig) -> np.ndarray:
+                cfg: OccupancyConfig, people: np.ndarray | None = None) -> np.ndarray:
     """bool (H, W): the cut rule's candidates (:attr:`OccupancyConfig.transient_cut_m`): 8-connected pieces of
     cells not believed free, each with an obstacle return (``top`` > 0) but none for ``transient_frames``
     frames, every cell ``freed``, of at most ``transient_piece_m2``, and with at least ``transient_ring_free`` of
-    the cells within ``transient_clear_m`` round the piece believed free."""
+    the cells within ``transient_clear_m`` round the piece believed free; with ``transient_people_frames``, also
+    some cell of the piece or within ``transient_clear_m`` of it with people returns (``people``, int (H, W)
+    frames, :attr:`OccupancyGrid.people`) in that many frames."""
     cand = (logodds > np.float32(cfg.free_below)) & (quiet >= cfg.transient_frames) & (top > 0.0)
     pieces, n = ndimage.label(cand, structure=_EIGHT)
     if n == 0:
@@ -557,8 +582,11 @@ def shut_pieces(logodds: np.ndarray, top: np.ndarray, freed: np.ndarray, quiet: 
             continue
         box = _around(sl, r, cand.shape)
         piece = pieces[box] == k
-        ring = ndimage.binary_dilation(piece, structure=disc) & ~piece
+        near = ndimage.binary_dilation(piece, structure=disc)
+        ring = near & ~piece
         ok[k] = ring.any() and free[box][ring].mean() >= cfg.transient_ring_free
+        if ok[k] and cfg.transient_people_frames > 0:
+            ok[k] = people is not None and int(people[box][near].max()) >= cfg.transient_people_frames
     return ok[pieces]
 
 

@@ -563,6 +563,47 @@ def test_occupancy_errors_sees_a_let_go_through_a_grown_grid():
     assert mod.let_go_any(before, OccupancyGrid((-2, -1), 0.05, np.zeros((6, 6), np.float32)))
 
 
+def test_let_go_events_tells_a_piece_on_the_floor_from_one_in_a_wall_and_reads_people_returns():
+    """benchmarks/let_go_events.py's pieces on a constructed case: the grid grew between the two updates; one
+    piece on open floor with people returns next to it, one in a wall with none; a cell that kept its top is
+    not a let-go."""
+    from scipy.ndimage import distance_transform_edt
+
+    from dynactivegs.selection.occupancy import OccupancyGrid
+    from dynactivegs.sim.freespace import FreeSpace
+
+    mod = _benchmark_module("let_go_events")
+    occ = np.zeros((40, 40), bool)
+    occ[:, 20:26] = True
+    fs = FreeSpace.from_grid(occ, 0.05)
+    clear_m = distance_transform_edt(fs.floor & ~fs.occupied) * 0.05
+    top = np.zeros((40, 40), np.float32)
+    top[10:12, 5:7], top[30, 22:24], top[5, 5] = 1.5, 0.9, 1.0
+    before = OccupancyGrid((0, 0), 0.05, np.zeros((40, 40), np.float32), top_m=top)
+    assert mod.pieces_let_go(before, before, fs, clear_m, 3) == []
+    after_top, people = np.zeros((42, 41), np.float32), np.zeros((42, 41), np.int32)
+    after_top[7, 6] = 1.0                                     # cell (5, 5), origin moved by (-2, -1): kept
+    people[14, 7], people[32, 27] = 4, 9                      # (12, 6): by the floor piece; (30, 26): 3 off the wall's
+    after = OccupancyGrid((-2, -1), 0.05, np.zeros((42, 41), np.float32), top_m=after_top, people=people)
+    floor, wall = mod.pieces_let_go(before, after, fs, clear_m, 3)
+    assert floor == {"cells": 4, "free": 4, "top_m": 1.5, "people": 4, "own": 0}
+    assert wall == {"cells": 2, "free": 0, "top_m": pytest.approx(0.9), "people": 9, "own": 0}
+    assert mod.pieces_let_go(before, after, fs, clear_m, 2)[1]["people"] == 0
+
+
+def test_let_go_events_reads_a_log(finished, capsys, monkeypatch):
+    """let_go_events.py on the sweep's full run: 6 frames let nothing go (50 quiet frames cannot pass); the
+    table and the counts are printed."""
+    _, logs = _sweep_logs(finished)
+    mod = _benchmark_module("let_go_events")
+    assert mod.run_events(logs[1], []) == ("tiny-00 seed 0", [])
+    monkeypatch.setattr(sys, "argv", ["let_go_events.py", str(logs[1])])
+    mod.main()
+    out = capsys.readouterr().out
+    assert "pieces let go: 0 on free floor (people), 0 in furniture or walls" in out
+    assert "transient_people_frames 10: would keep 0 of 0 people pieces" in out
+
+
 def test_path_stats_counts_the_logged_path(finished, capsys, tmp_path):
     """benchmarks/path_stats.py on the sweep's two runs: one action per step, the collisions dagsbench counted,
     the robot's distance driven and cells from its logged poses, the people near it from the logged truth; a

@@ -108,6 +108,10 @@ def test_an_uncertain_person_clears_space_but_is_not_an_obstacle():
     for _ in range(8):
         g = update_occupancy(g, CFG, empty_depth, K, T, beta_calm)
     assert g.states(CFG)[tuple(g.world_to_cell(np.array(cell_person)))] == CellState.FREE
+    # the uncertain person's returns are counted per frame in their cells (OccupancyGrid.people), the calm one's not
+    ij_m = tuple(moving.world_to_cell(np.array(cell_person)))
+    assert moving.people[ij_m] == 3 and moving.people.max() == 3 and not calm.people.any()
+    assert not (moving.people > 0)[moving.states(CFG) == CellState.OCCUPIED].any()     # the walls hold none
 
 
 def test_a_person_who_stood_long_is_cleared_in_a_few_frames_of_seeing_through():
@@ -309,6 +313,31 @@ def test_the_cut_rule_lets_go_a_person_who_shut_a_door_and_nothing_else():
     assert not let_go(g4, cut, g4.logodds, g4.top_m, nothing).free(cut)[door].any()
 
 
+def test_transient_people_frames_lets_go_only_a_piece_with_people_returns_near_it():
+    """transient_people_frames: the door's piece goes only where it, or a cell within transient_clear_m of it,
+    held people returns in that many frames (someone seen moving there); furniture never seen moving stays."""
+    cut = dataclasses.replace(OccupancyConfig(cell_m=0.05), transient_frames=50, transient_cut_m=0.22,
+                              transient_people_frames=2)
+    door = (slice(30, 32), slice(39, 41))
+    g = _two_doors_grid(cut, [(door, 0.96, True)])
+    nothing = np.zeros(g.shape, np.bool_)
+    assert not let_go(g, cut, g.logodds, g.top_m, nothing).free(cut)[door].any()      # no people returns
+    off = dataclasses.replace(cut, transient_people_frames=0)
+    assert let_go(g, off, g.logodds, g.top_m, nothing).free(off)[door].all()
+    for (i, j), frames, goes in (((32, 40), 2, True), ((32, 40), 1, False), ((31, 43), 2, True),
+                                 ((31, 44), 2, False), ((10, 10), 5, False)):
+        people = np.zeros(g.shape, np.int32)
+        people[i, j] = frames                  # (31, 43): 0.15 m from the piece's edge cell; (31, 44): 0.2 m
+        gp = dataclasses.replace(g, people=people)
+        assert let_go(gp, cut, g.logodds, g.top_m, nothing).free(cut)[door].all() == goes, ((i, j), frames)
+    # the frame's own people cells are counted before the test: one more frame makes 2
+    people = np.zeros(g.shape, np.int32)
+    people[30, 39] = 1
+    seen = people > 0
+    after = let_go(dataclasses.replace(g, people=people), cut, g.logodds, g.top_m, nothing, seen)
+    assert after.people[30, 39] == 2 and after.free(cut)[door].all()
+
+
 def test_rays_passing_high_over_a_low_obstacle_leave_it_occupied():
     seat = (2.03, 1.33, 2.43, 1.73, 0.5)
     depth, K, T, _ = _room_frame(boxes=[seat], x=0.3)             # seen from 1.7 m
@@ -374,5 +403,7 @@ def test_bad_config_values_raise_config_error():
         OccupancyConfig(transient_cut_m=-0.1)
     with pytest.raises(ConfigError, match="transient_cut_min_m2"):
         OccupancyConfig(transient_cut_min_m2=-1.0)
+    with pytest.raises(ConfigError, match="transient_people_frames"):
+        OccupancyConfig(transient_people_frames=-1)
     with pytest.raises(ConfigError, match="transient_ring_free"):
         OccupancyConfig(transient_ring_free=1.5)
