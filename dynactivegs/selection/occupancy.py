@@ -463,24 +463,23 @@ def _trace_free(start_g, start_z, end_g, end_z, end_free, top_m, clear_below, se
         seen_free[ci0, cj0] = True
 
 
-def _occupied_cells(rays: FrameRays, which: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(rows, cols) int64 of the cells holding the frame's static obstacle returns (or the rays ``which``, bool
-    (N,)), in ray order."""
-    e = rays.end_g[rays.end_occupied if which is None else which]
+def _end_cells(rays: FrameRays, which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) int64 of the cells holding the ends of the rays ``which`` (bool (N,)), in ray order."""
+    e = rays.end_g[which]
     return np.floor(e[:, 1]).astype(np.int64), np.floor(e[:, 0]).astype(np.int64)
 
 
 def people_cells(shape: tuple[int, int], rays: FrameRays) -> np.ndarray:
     """bool (H, W): the cells holding the frame's people returns (:attr:`FrameRays.end_people`)."""
     seen = np.zeros(shape, np.bool_)
-    seen[_occupied_cells(rays, rays.end_people)] = True     # the grid holds every ray end (frame_rays)
+    seen[_end_cells(rays, rays.end_people)] = True     # the grid holds every ray end (frame_rays)
     return seen
 
 
 def obstacle_tops(top_m: np.ndarray, rays: FrameRays) -> np.ndarray:
     """float32 (H, W): ``top_m`` raised to this frame's static obstacle returns (their heights)."""
     top = top_m.copy()
-    np.maximum.at(top, _occupied_cells(rays), rays.end_z_m[rays.end_occupied].astype(np.float32))
+    np.maximum.at(top, _end_cells(rays, rays.end_occupied), rays.end_z_m[rays.end_occupied].astype(np.float32))
     return top
 
 
@@ -493,7 +492,7 @@ def seen_masks(shape: tuple[int, int], rays: FrameRays, top_m: np.ndarray,
                 np.ascontiguousarray(rays.end_z_m, dtype=np.float64), rays.end_free,
                 np.ascontiguousarray(top_m, dtype=np.float32), float(clear_below_m), seen_free)
     seen_occ = np.zeros(shape, np.bool_)
-    seen_occ[_occupied_cells(rays)] = True
+    seen_occ[_end_cells(rays, rays.end_occupied)] = True
     return seen_free, seen_occ
 
 
