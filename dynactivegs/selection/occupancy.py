@@ -176,7 +176,10 @@ class OccupancyConfig:
     transient_cut_min_m2: float = 0.5
     """With ``transient_cut_m``, pieces of the floor a disc can travel smaller than this (m2 of the disc's centre
     positions) do not count as joined: pockets beside furniture. Measured on ``full``, apartment-00 seed 0 (1000
-    steps, logged frames): without it the rule let go twice, each time joining a pocket of 0.003-0.13 m2."""
+    steps, logged frames): without it the rule let go twice, each time joining a pocket of 0.003-0.13 m2. At 0.25
+    it would free a 0.33 m2 strip two people's pieces held parted for 116 steps (baseline, loop-03 seed 2), but over
+    52 logs at the defaults on one machine (benchmarks/let_go_events.py, open loop) it lets 57 pieces go against 35:
+    2 more on the static scene's free floor (people), 20 more in furniture."""
 
     def __post_init__(self) -> None:
         check_config(0.005 <= self.cell_m <= 1.0, "occupancy.cell_m", self.cell_m, "in [0.005, 1] m")
