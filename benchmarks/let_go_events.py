@@ -28,7 +28,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from occupancy_errors import truth_cell, truth_maps  # noqa: E402  (the same truth map)
+from occupancy_errors import let_go_cells, truth_cell, truth_maps  # noqa: E402  (the same truth map and let-go)
 from psnr_breakdown import logged_config  # noqa: E402  (the same reading of a run log)
 
 THRESHOLDS = (1, 2, 5, 10)
@@ -41,12 +41,11 @@ def pieces_let_go(before, after, fs, clear_m: np.ndarray, clear_r: float) -> lis
     ``clear_r`` cells of it, in ``after``) and own (of a cell of it)."""
     from scipy import ndimage
 
-    di, dj = before.origin_ij[0] - after.origin_ij[0], before.origin_ij[1] - after.origin_ij[1]
-    h, w = before.shape
-    gone = np.zeros(after.shape, np.bool_)
-    gone[di:di + h, dj:dj + w] = (before.top_m > 0) & (after.top_m[di:di + h, dj:dj + w] <= 0)
+    gone = let_go_cells(before, after)
     if not gone.any():
         return []
+    di, dj = before.origin_ij[0] - after.origin_ij[0], before.origin_ij[1] - after.origin_ij[1]
+    h, w = before.shape
     top_before = np.zeros(after.shape, np.float32)
     top_before[di:di + h, dj:dj + w] = before.top_m
     r = int(round(clear_r))

@@ -104,12 +104,20 @@ def cut_off_m2(grid, occ_cfg, fs, truth: tuple[np.ndarray, np.ndarray, np.ndarra
     return float(apart.sum()) * grid.cell_m ** 2
 
 
-def let_go_any(before, after) -> bool:
-    """Whether the update from grid ``before`` to ``after`` let a cell go: only that sets a cell's obstacle top
-    (which otherwise only rises) back to 0. The grid may have grown: ``before`` sits inside ``after``."""
+def let_go_cells(before, after) -> np.ndarray:
+    """bool, ``after``'s shape: the cells the update from grid ``before`` to ``after`` let go: only that sets a
+    cell's obstacle top (which otherwise only rises) back to 0. The grid may have grown: ``before`` sits inside
+    ``after``."""
     di, dj = before.origin_ij[0] - after.origin_ij[0], before.origin_ij[1] - after.origin_ij[1]
     h, w = before.shape
-    return bool(((before.top_m > 0) & (after.top_m[di:di + h, dj:dj + w] <= 0)).any())
+    gone = np.zeros(after.shape, np.bool_)
+    gone[di:di + h, dj:dj + w] = (before.top_m > 0) & (after.top_m[di:di + h, dj:dj + w] <= 0)
+    return gone
+
+
+def let_go_any(before, after) -> bool:
+    """Whether the update from grid ``before`` to ``after`` let a cell go (:func:`let_go_cells`)."""
+    return bool(let_go_cells(before, after).any())
 
 
 def grid_errors(grid, occ_cfg, fs, clear_m: np.ndarray, inside_m: np.ndarray, margin_m: float) -> dict[str, float]:
