@@ -777,6 +777,33 @@ def test_the_evade_step_is_taken_only_where_nothing_is_seen():
     assert actions.count(F) == 0
 
 
+def test_with_evade_map_check_the_evade_step_keeps_clear_of_known_obstacles_the_camera_misses():
+    from scipy import ndimage
+    sel, fo, mo, cfg, start, yaw = _one_room_way_ahead()
+    F, L = Action.FORWARD, Action.TURN_LEFT
+    turns = math.ceil(cfg.evade_turn_deg / cfg.actions.turn_step_deg)
+    # a corner 0.35 m away on the heading the turn-away ends at (60 deg left): in the map, not in the (blind) frames
+    cell, size = 0.05, 41
+    origin = start - 0.5 * size * cell
+    corner = start + 0.35 * np.array([math.cos(yaw + math.radians(60)), math.sin(yaw + math.radians(60))])
+    occ = np.zeros((size, size), bool)
+    occ[tuple(np.floor((corner[::-1] - origin[::-1]) / cell).astype(int))] = True
+    clear = (ndimage.distance_transform_edt(~occ) * cell).astype(np.float32)
+    walled = dataclasses.replace(sel, local_clear_m=clear, local_origin_xy_m=origin, local_cell_m=cell)
+    # the depth frame alone: the step at 60 deg is taken (and would bump the corner)
+    actions, _ = _bump_in_place(cfg, walled, fo, mo, start, yaw, steps=3 + turns)
+    assert actions == [F, F] + [L] * turns + [F]
+    # with the map: it turns on until the step keeps clear of the corner, then steps
+    checked = dataclasses.replace(cfg, evade_map_check=True)
+    actions, outs = _bump_in_place(checked, walled, fo, mo, start, yaw, steps=3 + turns + 8)
+    first_f = actions.index(F, 2)
+    assert actions[2:first_f] == [L] * (first_f - 2) and first_f > 2 + turns
+    heading = yaw + math.radians(cfg.actions.turn_step_deg) * (first_f - 2)
+    along = np.linspace(0.0, cfg.actions.forward_step_m, 26)[:, None] * [math.cos(heading), math.sin(heading)]
+    assert np.hypot(*(start + along - corner).T).min() >= cfg.actions.radius_m
+    assert all(o.blocked and len(o.path_xy_m) == 0 for o in outs[2:first_f + 1])
+
+
 def test_space_beyond_the_fields_grid_counts_as_unobserved():
     # a 3 x 3 m grid, observed everywhere (U_s 0.2) but one unobserved voxel (U_s 1); the node is near its +x edge
     shape = (20, 20, 20)
