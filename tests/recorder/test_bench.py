@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import shutil
 import subprocess
@@ -602,6 +603,60 @@ def test_let_go_events_reads_a_log(finished, capsys, monkeypatch):
     out = capsys.readouterr().out
     assert "pieces let go: 0 on free floor (people), 0 in furniture or walls" in out
     assert "transient_people_frames 10: would keep 0 of 0 people pieces" in out
+
+
+def test_evade_steps_tells_a_bump_the_map_check_refuses_from_a_step_that_moved():
+    """benchmarks/evade_steps.py on constructed steps: a turn-away step toward a known obstacle 0.3 m ahead that
+    bumped, one away from it that moved, a path's forward step (not a turn-away), and a last turn-away step
+    with no next step (left out)."""
+    from types import SimpleNamespace as NS
+
+    from scipy.ndimage import distance_transform_edt
+
+    from dynactivegs.planning.actions import ActionConfig
+
+    mod = _benchmark_module("evade_steps")
+    cell, size = 0.05, 41
+    occ = np.zeros((size, size), bool)
+    occ[20, 26] = True                                        # 0.3 m along +x from the window's centre (1, 1)
+    sel = NS(local_clear_m=(distance_transform_edt(~occ) * cell).astype(np.float32),
+             local_origin_xy_m=np.array([1.0, 1.0]) - 0.5 * size * cell, local_cell_m=cell)
+
+    class Step:
+        def __init__(self, i, x, yaw, evade, path=0):
+            self.step, self._d = i, {"/truth": NS(robot=NS(x_m=x, y_m=1.0, yaw_rad=yaw)), "/selection": sel,
+                                     "/planning": NS(action=0, blocked=evade, path_xy_m=np.zeros((path, 2)))}
+
+        def get(self, topic):
+            return self._d[topic]
+
+    steps = [Step(0, 1.0, 0.0, True), Step(1, 1.0, math.pi, True), Step(2, 0.75, math.pi, False, path=3),
+             Step(3, 0.5, math.pi, True)]
+    got = mod.evade_steps(steps, ActionConfig(), 0.05)
+    assert got == [{"step": 0, "map_ok": False, "moved": False}, {"step": 1, "map_ok": True, "moved": True}]
+    assert mod.counts(got) == (1, 0, 0, 1)
+
+
+def test_evade_steps_reads_a_log(finished, capsys):
+    """evade_steps.py on the sweep's full run: every step it finds is a blocked forward step with no path in
+    the log; the table and the sum are printed; a missing log is one line."""
+    from replay.source import LogReader
+
+    out, _ = finished
+    log = out / "runs" / "full" / "tiny-00-seed0.mcap"
+    mod = _benchmark_module("evade_steps")
+    label, steps = mod.run_steps(log)
+    assert label == "tiny-00 seed 0"
+    logged = {st.step: st["/planning"] for st in LogReader(log).steps()}
+    for s in steps:
+        pl = logged[s["step"]]
+        assert pl.action == 0 and pl.blocked and len(pl.path_xy_m) == 0
+    assert mod.main([str(log)]) == 0
+    printed = capsys.readouterr().out
+    assert printed.startswith("| run | turn-away steps") and f"| tiny-00 seed 0 (full) | {len(steps)} |" in printed
+    assert f"{len(steps)} turn-away steps in 1 runs" in printed
+    with pytest.raises(SystemExit, match="not found"):
+        mod.main([str(out / "missing.mcap")])
 
 
 def test_path_stats_counts_the_logged_path(finished, capsys, tmp_path):
