@@ -116,6 +116,12 @@ class BlockedRecord:
                 "in_grid_pct": 100.0 * self.in_grid / self.close if self.close else float("nan")}
 
 
+def turned_away(plan) -> bool:
+    """Whether a logged PlanningOut is a step of the turn-away (blocked, and no re-plan: a block seen or remembered
+    always re-plans, the turn-away does not)."""
+    return bool(plan.blocked and not plan.replanned)
+
+
 def step_cause(plan, frame, truth, acfg) -> str | None:
     """The cause (one of STEP_CAUSES) of a blocked step, None for a step that was not blocked. ``plan`` is the
     step's PlanningOut, ``frame`` its FrameRecord, ``truth`` its SimTruth, ``acfg`` the run's ActionConfig."""
@@ -123,8 +129,8 @@ def step_cause(plan, frame, truth, acfg) -> str | None:
 
     if plan is None or not plan.blocked:
         return None
-    if not plan.replanned:
-        return "evade"                          # a block seen or remembered always re-plans; the turn-away does not
+    if turned_away(plan):
+        return "evade"
     hits = forward_hits(frame.depth_m, frame.K, frame.T_world_cam, acfg)
     if len(hits) < acfg.min_blocking_points:
         return "remembered"

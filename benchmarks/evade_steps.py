@@ -4,7 +4,7 @@
 
 After bumps or waits in a row the planner turns away and tries one forward step (``planning.bump_evade_after``,
 ``wait_evade_after``); it takes that step where the depth frame shows nothing in the way. For each run log this
-finds those steps (the logged action is a forward step, blocked, with no path: the turn-away chose it), whether
+finds those steps (a forward step of the turn-away, as ``blocked_episodes.py`` tells it: blocked, no re-plan), whether
 the robot then moved (by ``planning.bump_tol_m`` or more; else it bumped) and whether the step keeps clear of the
 known obstacles around the robot (:func:`dynactivegs.planning.actions.clear_headings` on the logged
 ``SelectionOut.local_clear_m``): the test ``planning.evade_map_check`` adds, under which the robot turns on rather
@@ -28,6 +28,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from blocked_episodes import turned_away  # noqa: E402  (the same turn-away steps)
 from psnr_breakdown import logged_config  # noqa: E402  (the same reading of a run log)
 
 
@@ -36,6 +37,7 @@ def evade_steps(steps: Iterable, acfg, bump_tol_m: float) -> list[dict]:
     records), with the step, ``moved`` (the next step's robot is ``bump_tol_m`` or more away) and ``map_ok``
     (the step keeps clear of the logged window's obstacles); a last step with no next one is left out."""
     from dynactivegs.planning.actions import clear_headings
+    from dynactivegs.sim.robot import Action
 
     out, pending = [], None
     for st in steps:
@@ -45,7 +47,7 @@ def evade_steps(steps: Iterable, acfg, bump_tol_m: float) -> list[dict]:
             out.append(pending)
             pending = None
         pl = st.get("/planning")
-        if pl.action == 0 and pl.blocked and len(pl.path_xy_m) == 0:
+        if pl.action == Action.FORWARD and turned_away(pl):
             sel = st.get("/selection")
             ok = clear_headings(sel.local_clear_m, sel.local_origin_xy_m, sel.local_cell_m, rb,
                                 np.array([rb.yaw_rad]), acfg)[0]

@@ -625,7 +625,8 @@ def test_evade_steps_tells_a_bump_the_map_check_refuses_from_a_step_that_moved()
     class Step:
         def __init__(self, i, x, yaw, evade, path=0):
             self.step, self._d = i, {"/truth": NS(robot=NS(x_m=x, y_m=1.0, yaw_rad=yaw)), "/selection": sel,
-                                     "/planning": NS(action=0, blocked=evade, path_xy_m=np.zeros((path, 2)))}
+                                     "/planning": NS(action=0, blocked=evade, replanned=path > 0,
+                                                     path_xy_m=np.zeros((path, 2)))}
 
         def get(self, topic):
             return self._d[topic]
@@ -638,8 +639,8 @@ def test_evade_steps_tells_a_bump_the_map_check_refuses_from_a_step_that_moved()
 
 
 def test_evade_steps_reads_a_log(finished, capsys):
-    """evade_steps.py on the sweep's full run: every step it finds is a blocked forward step with no path in
-    the log; the table and the sum are printed; a missing log is one line."""
+    """evade_steps.py on the sweep's full run: every step it finds is a blocked forward step with no re-plan and
+    no path in the log; the table and the sum are printed; a missing log is one line."""
     from replay.source import LogReader
 
     out, _ = finished
@@ -650,7 +651,7 @@ def test_evade_steps_reads_a_log(finished, capsys):
     logged = {st.step: st["/planning"] for st in LogReader(log).steps()}
     for s in steps:
         pl = logged[s["step"]]
-        assert pl.action == 0 and pl.blocked and len(pl.path_xy_m) == 0
+        assert pl.action == 0 and pl.blocked and not pl.replanned and len(pl.path_xy_m) == 0
     assert mod.main([str(log)]) == 0
     printed = capsys.readouterr().out
     assert printed.startswith("| run | turn-away steps") and f"| tiny-00 seed 0 (full) | {len(steps)} |" in printed
