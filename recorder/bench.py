@@ -339,7 +339,7 @@ def run_one(spec: RunSpec, torch_threads: int | None = None) -> dict[str, Any]:
         "seconds_eval": time.perf_counter() - t2,
         "seconds_setup": t_setup, "collisions": res.collisions,
         "mcap": spec.mcap_path.name if spec.mcap else None,
-        "machine": machine_info(),          # runs repeat bit for bit only on one machine id
+        "machine": machine_info(),          # runs are promised to repeat bit for bit only on one id
     }
     tmp = spec.metrics_path.with_suffix(".json.tmp")
     tmp.write_text(json.dumps(result, indent=1))

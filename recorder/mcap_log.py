@@ -114,8 +114,10 @@ def machine_info() -> dict[str, str]:
     ``llvm_cpu`` (the CPU numba compiles its kernels for), ``cores`` (recorded, not part of the id: the
     rasteriser's kernels give the same bits on any thread count), and ``id``, a short hash of cpu, isa,
     llvm_cpu, Python's and :data:`MACHINE_PACKAGES`' versions. A closed loop turns a last-bit difference in a
-    float reduction into a different run, so runs repeat bit for bit only where ``id`` is the same (DESIGN.md
-    §3); runs with different ids are draws of the closed loop, not repeats."""
+    float reduction into a different run, so runs are promised to repeat bit for bit only where ``id`` is the
+    same (DESIGN.md §3). A differing id can still repeat them: two AMD EPYC machines (znver4) whose ids differ by
+    the packages' versions alone made 7 of 8 runs alike to the last digit, the eighth where an option's default
+    had changed (benchmarks/results/apartment-1000-machine4); an Intel one did not."""
     try:
         import torch
 
